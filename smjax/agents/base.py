@@ -1,0 +1,52 @@
+"""The interface between learners and the (hierarchical) rollout machinery.
+
+A rollout is a sequence of *ticks*; in every tick every environment takes one primitive
+step. The learner does not decide in every tick: while an option it called is running
+(or while the levels above have not yet called the learner's template) other policies
+act. ``Transition.decision`` marks the ticks where the learner chose; rewards and
+discounts of the ticks in between belong to the learner's previous decision, which is
+how an option that ran k ticks earns ``sum_i gamma^i r_i`` and a ``gamma^k`` bootstrap
+(SMDP). ``discount`` is per tick: ``gamma`` normally, ``gamma**d`` for a tick in which a
+template was teleported (d = the template's nominal duration).
+
+An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over:
+
+* ``init(key, example_obs, num_actions) -> state`` (state is a pytree with ``.params``)
+* ``act(state, obs[B], mask[B, A], key) -> ActOutput`` (exploring behaviour policy)
+* ``update(state, traj: Transition[T, B], last_obs[B], key) -> (state, metrics)``
+* ``policy_logits(params, obs[B]) -> logits[B, A]`` (greedy scores for a frozen policy
+  in the policy bank: actor logits for policy-gradient learners, Q-values for DQN)
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax
+
+
+class Transition(NamedTuple):
+    """One tick of B environments (leading axes [T, B] inside a rollout)."""
+
+    obs: jax.Array          # observation before the tick's step
+    action: jax.Array       # int32 action index the learner chose (meaningful where decision)
+    action_mask: jax.Array  # bool [A]: actions the learner could choose at this tick
+    log_prob: jax.Array     # behaviour log-probability of ``action``
+    value: jax.Array        # learner's value estimate of ``obs``
+    decision: jax.Array     # bool: the learner decided at this tick
+    reward: jax.Array       # learner reward received after this tick's step
+    discount: jax.Array     # per-tick discount factor (gamma or gamma**d)
+    done: jax.Array         # bool: the learner's episode ended after this tick
+
+
+class ActOutput(NamedTuple):
+    action: jax.Array
+    log_prob: jax.Array
+    value: jax.Array
+
+
+class Agent(NamedTuple):
+    name: str
+    init: Callable[..., Any]
+    act: Callable[..., ActOutput]
+    update: Callable[..., tuple[Any, dict]]
+    policy_logits: Callable[[Any, jax.Array], jax.Array]

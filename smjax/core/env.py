@@ -1,0 +1,113 @@
+"""The environment protocol every smjax environment implements (gymnax 1.0 lineage).
+
+An environment is a stateless object whose methods are pure functions of explicit
+state and params, so they jit and vmap. Subclasses implement ``reset_env``,
+``step_env`` (no auto-reset) and the spaces; the base class adds ``reset`` and the
+auto-resetting six-value ``step``:
+
+    obs, state, reward, terminated, truncated, info = env.step(key, state, action, params)
+
+When an episode ends inside ``step`` the returned ``obs``/``state`` already belong to
+the next episode and ``info["final_observation"]`` holds the observation it ended on.
+The option machinery uses ``step_env``/``reset_env`` directly, because it decides
+itself when an episode (of a learner) ends.
+"""
+from __future__ import annotations
+
+from typing import Any, Generic, TypeVar
+
+import jax
+import jax.numpy as jnp
+
+from smjax.core import spaces
+
+TEnvState = TypeVar("TEnvState")
+TEnvParams = TypeVar("TEnvParams")
+
+StepResult = tuple[jax.Array, Any, jax.Array, jax.Array, jax.Array, dict]
+
+
+def select_tree(pred: jax.Array, on_true: Any, on_false: Any) -> Any:
+    """Leaf-wise ``jnp.where`` over two pytrees of equal structure (pred is a scalar bool)."""
+    return jax.tree.map(lambda a, b: jnp.where(pred, a, b), on_true, on_false)
+
+
+class Environment(Generic[TEnvState, TEnvParams]):
+    """Base class of smjax environments."""
+
+    #: ``ENV/TASK`` name this instance was made for (set by the registry).
+    name: str = "unnamed"
+
+    # ---- to implement -------------------------------------------------
+    @property
+    def default_params(self) -> TEnvParams:
+        raise NotImplementedError
+
+    def reset_env(self, key: jax.Array, params: TEnvParams) -> tuple[jax.Array, TEnvState]:
+        raise NotImplementedError
+
+    def step_env(
+        self, key: jax.Array, state: TEnvState, action: jax.Array, params: TEnvParams
+    ) -> StepResult:
+        """One step without auto-reset: (obs, state, reward, terminated, truncated, info)."""
+        raise NotImplementedError
+
+    def get_obs(self, state: TEnvState, params: TEnvParams) -> jax.Array:
+        raise NotImplementedError
+
+    def action_space(self, params: TEnvParams | None = None) -> spaces.Space:
+        raise NotImplementedError
+
+    def observation_space(self, params: TEnvParams | None = None) -> spaces.Space:
+        raise NotImplementedError
+
+    def render(self, state: TEnvState, params: TEnvParams | None = None):
+        """RGB uint8 image (H, W, 3) of one (unbatched) state."""
+        raise NotImplementedError
+
+    def templates(self) -> dict:
+        """Option templates this environment offers, by name (may be empty)."""
+        return {}
+
+    def hierarchies(self) -> dict:
+        """Named hierarchies (``smjax.options.Hierarchy``) over ``templates()``."""
+        return {}
+
+    @property
+    def primitive_action_names(self) -> tuple[str, ...]:
+        """Names of the discrete primitive actions (empty for continuous actions)."""
+        space = self.action_space(self.default_params)
+        if isinstance(space, spaces.Discrete) and space.shape == ():
+            return tuple(f"action_{i}" for i in range(space.n))
+        return ()
+
+    # ---- provided -------------------------------------------------------
+    def reset(self, key: jax.Array, params: TEnvParams | None = None) -> tuple[jax.Array, TEnvState]:
+        if params is None:
+            params = self.default_params
+        return self.reset_env(key, params)
+
+    def step(
+        self,
+        key: jax.Array,
+        state: TEnvState,
+        action: jax.Array,
+        params: TEnvParams | None = None,
+    ) -> StepResult:
+        """Step with auto-reset; the pre-reset observation is in ``info["final_observation"]``."""
+        if params is None:
+            params = self.default_params
+        key_step, key_reset = jax.random.split(key)
+        obs_st, state_st, reward, terminated, truncated, info = self.step_env(
+            key_step, state, action, params
+        )
+        obs_re, state_re = self.reset_env(key_reset, params)
+        done = jnp.logical_or(terminated, truncated)
+        state = select_tree(done, state_re, state_st)
+        obs = select_tree(done, obs_re, obs_st)
+        info = dict(info)
+        info["final_observation"] = obs_st
+        return obs, state, reward, terminated, truncated, info
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name}>"

@@ -1,0 +1,101 @@
+"""``smjax.make("ENV/TASK", **overrides)`` and ``smjax.registry()``.
+
+Environment packages register their tasks when imported; the registry imports them
+lazily on first use so that ``import smjax`` stays cheap (MuJoCo is only loaded when a
+``fetch/...`` task is made).
+"""
+from __future__ import annotations
+
+import difflib
+import importlib
+import inspect
+from dataclasses import dataclass
+from typing import Any, Callable
+
+# Modules whose import registers tasks. Order is the listing order.
+ENV_MODULES = ("smjax.envs.craft", "smjax.envs.fetch", "smjax.envs.football")
+
+
+@dataclass(frozen=True)
+class RegistryEntry:
+    name: str
+    factory: Callable[..., tuple[Any, Any]]
+    description: str
+
+    @property
+    def override_names(self) -> tuple[str, ...]:
+        params = inspect.signature(self.factory).parameters.values()
+        return tuple(p.name for p in params if p.kind == p.KEYWORD_ONLY)
+
+
+_REGISTRY: dict[str, RegistryEntry] = {}
+_LOADED: set[str] = set()
+_LOAD_ERRORS: dict[str, str] = {}
+
+
+def register(name: str, factory: Callable[..., tuple[Any, Any]], description: str = "") -> None:
+    """Register ``factory(**overrides) -> (env, params)`` under ``ENV/TASK``.
+
+    Overrides a task accepts are the factory's keyword-only parameters.
+    """
+    if name.count("/") != 1 or not all(name.split("/")):
+        raise ValueError(f"task names look like 'ENV/TASK', got {name!r}")
+    _REGISTRY[name] = RegistryEntry(name, factory, description)
+
+
+def _load(env_prefix: str | None = None) -> None:
+    for module in ENV_MODULES:
+        short = module.rsplit(".", 1)[-1]
+        if module in _LOADED or (env_prefix is not None and short != env_prefix):
+            continue
+        _LOADED.add(module)
+        try:
+            importlib.import_module(module)
+        except ImportError as err:  # keep the others usable; say why on lookup
+            _LOAD_ERRORS[short] = f"{type(err).__name__}: {err}"
+
+
+def registry() -> dict[str, str]:
+    """All registered task names -> one-line descriptions."""
+    _load()
+    return {name: entry.description for name, entry in sorted(_REGISTRY.items())}
+
+
+def get_entry(name: str) -> RegistryEntry:
+    if not isinstance(name, str) or "/" not in name:
+        _load()
+        raise ValueError(
+            f"task names look like 'ENV/TASK' (e.g. 'craft/get_gem'), got {name!r}. "
+            f"Valid names: {', '.join(sorted(_REGISTRY))}"
+        )
+    _load(name.split("/", 1)[0])
+    if name not in _REGISTRY:
+        _load()
+        prefix = name.split("/", 1)[0]
+        hint = ""
+        if prefix in _LOAD_ERRORS:
+            hint = f" (environment package '{prefix}' failed to import: {_LOAD_ERRORS[prefix]})"
+        close = difflib.get_close_matches(name, list(_REGISTRY), n=3)
+        maybe = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+        raise KeyError(
+            f"unknown task {name!r}{hint}.{maybe} Valid names: {', '.join(sorted(_REGISTRY))}"
+        )
+    return _REGISTRY[name]
+
+
+def make(name: str, **overrides: Any) -> tuple[Any, Any]:
+    """Make an environment and its default params: ``env, params = make("craft/get_gem")``.
+
+    Unknown names and unknown override keys raise errors that list the valid choices.
+    """
+    entry = get_entry(name)
+    valid = entry.override_names
+    unknown = sorted(set(overrides) - set(valid))
+    if unknown:
+        raise TypeError(
+            f"unknown override(s) {unknown} for {name!r}; valid overrides: "
+            f"{', '.join(valid) if valid else '(none)'}"
+        )
+    env, params = entry.factory(**overrides)
+    env.name = name
+    return env, params

@@ -1,0 +1,85 @@
+"""Option templates: an initiation set, a termination condition and a way to be realised.
+
+A template is data plus pure functions of (state, params); it knows nothing about any
+environment. Before its policy is learned it is realised either by a **teleport** (the
+environment jumps to an outcome of the skill in one step) or by a scripted
+**controller** (played tick by tick until ``satisfied`` or ``k_max``).
+
+Signatures (all jittable, unbatched; vmap them for batches):
+
+* ``initiation(state, params) -> bool``: may the template be called here?
+* ``satisfied(state, params) -> bool``: F_o, the outcome the template promises.
+* ``teleport(key, state, params) -> (state, action)``: jump to an outcome and name the
+  primitive action to execute in that same tick, so a teleport is exactly one
+  environment step (Craft: stand next to X facing it, then USE).
+* ``controller(key, state, params) -> action``: the scripted primitive action.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Optional
+
+import jax
+import jax.numpy as jnp
+
+StateFn = Callable[[Any, Any], jax.Array]
+TeleportFn = Callable[[jax.Array, Any, Any], tuple[Any, jax.Array]]
+ControllerFn = Callable[[jax.Array, Any, Any], jax.Array]
+
+
+def always(state: Any, params: Any) -> jax.Array:
+    """Initiation set that holds everywhere."""
+    return jnp.asarray(True)
+
+
+@dataclass(frozen=True)
+class OptionTemplate:
+    """An option template a_o = (I, T, P) plus how to realise it before it is learned.
+
+    Attributes:
+      name: unique name used in hierarchies.
+      satisfied: F_o, True when the template's outcome holds.
+      k_max: tick budget; an option running this long is popped (T = F_o or k > k_max).
+      initiation: I; calls outside it are masked out of the caller's choices.
+      teleport: realisation by jumping to an outcome (one tick), or None.
+      controller: scripted realisation (runs until satisfied or k_max), or None.
+      nominal_steps: d, the duration a teleported call stands for; the caller's SMDP
+        discount for a teleport is gamma**d (the reference's gamma^d per template).
+      description: one line for docs and ``--help``.
+    """
+
+    name: str
+    satisfied: StateFn
+    k_max: int
+    initiation: StateFn = always
+    teleport: Optional[TeleportFn] = None
+    controller: Optional[ControllerFn] = None
+    nominal_steps: int = 1
+    description: str = ""
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"template name must be a non-empty string, got {self.name!r}")
+        if int(self.k_max) < 1:
+            raise ValueError(f"template {self.name!r}: k_max must be >= 1, got {self.k_max}")
+        if int(self.nominal_steps) < 1:
+            raise ValueError(
+                f"template {self.name!r}: nominal_steps must be >= 1, got {self.nominal_steps}"
+            )
+
+    @property
+    def realisable(self) -> bool:
+        """True if the template can run before it is learned (teleport or controller)."""
+        return self.teleport is not None or self.controller is not None
+
+
+def teleport_step(env: Any, template: OptionTemplate, key: jax.Array, state: Any, params: Any):
+    """Realise ``template`` by teleport as one environment step (no auto-reset).
+
+    Returns ``env.step_env``'s six values after the jump.
+    """
+    if template.teleport is None:
+        raise ValueError(f"template {template.name!r} has no teleport")
+    key_tp, key_step = jax.random.split(key)
+    jumped, action = template.teleport(key_tp, state, params)
+    return env.step_env(key_step, jumped, action, params)
