@@ -1,0 +1,44 @@
+"""Learners: PPO, DQN and the paper's actor-critic, all over SMDP decisions.
+
+``make_agent("ppo", learning_rate=3e-4)`` builds an :class:`smjax.agents.base.Agent`
+from the algorithm's config dataclass with the given fields overridden.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from smjax.agents import actor_critic, dqn, ppo
+from smjax.agents.actor_critic import ActorCriticConfig
+from smjax.agents.base import ActOutput, Agent, Transition
+from smjax.agents.config import replace_checked
+from smjax.agents.dqn import DQNConfig
+from smjax.agents.ppo import PPOConfig
+from smjax.agents.smdp import smdp_gae, smdp_transitions
+
+ALGOS: tuple[str, ...] = ("ppo", "dqn", "actor-critic")
+
+_CONFIGS = {"ppo": PPOConfig, "dqn": DQNConfig, "actor-critic": ActorCriticConfig}
+_MAKERS = {"ppo": ppo.make_agent, "dqn": dqn.make_agent, "actor-critic": actor_critic.make_agent}
+
+
+def default_config(algo: str) -> Any:
+    """The default config dataclass of ``algo``."""
+    if algo not in _CONFIGS:
+        raise ValueError(f"unknown algo {algo!r}; valid algos: {', '.join(ALGOS)}")
+    return _CONFIGS[algo]()
+
+
+def make_config(algo: str, **config_overrides: Any) -> Any:
+    """``algo``'s config with fields overridden (unknown fields and bad values raise ValueError)."""
+    return replace_checked(default_config(algo), **config_overrides)
+
+
+def make_agent(algo: str, **config_overrides: Any) -> Agent:
+    """Build the learner ``algo`` (one of :data:`ALGOS`) with config fields overridden."""
+    return _MAKERS[algo](make_config(algo, **config_overrides))
+
+
+__all__ = [
+    "ALGOS", "make_agent", "make_config", "default_config", "Agent", "ActOutput", "Transition",
+    "PPOConfig", "DQNConfig", "ActorCriticConfig", "smdp_gae", "smdp_transitions",
+]

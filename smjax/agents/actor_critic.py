@@ -1,0 +1,149 @@
+"""The paper's learner: REINFORCE with a learned baseline and decaying epsilon exploration.
+
+Reference setting (Sticky Mittens, Craft): one hidden layer of 100 units, Adam 1e-3,
+gamma 0.99 (gamma**d on teleported template calls), exploration
+``epsilon = exp(-5e-3 * episodes_seen)``: with probability epsilon a uniformly random
+*allowed* action, otherwise a sample from the policy.
+
+Returns are SMDP Monte-Carlo returns (``smdp_gae`` with ``lam = 1``): 0 bootstrap at an
+episode end; a decision still open at the rollout end bootstraps from the critic's value
+of ``last_obs`` (``bootstrap_at_rollout_end=True``) or from 0 (the reference updated only
+after whole episodes, so it never needed either). One gradient step per ``update`` call;
+the reference updated once per 20 episodes, which the trainer reproduces by choosing the
+rollout length.
+
+Every loss is a mean over decision ticks: ``-log pi(a|s) * (G - V(s))`` (baseline held
+fixed), ``vf_coef * 0.5 * (G - V(s))**2``, minus ``ent_coef * entropy``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import optax
+
+from smjax.agents import config as checks
+from smjax.agents.base import ActOutput, Agent, Transition
+from smjax.agents.networks import flatten_obs, masked_entropy, masked_log_softmax, masked_mean, take_action
+from smjax.agents.ppo import (
+    PolicyGradientState,
+    init_policy_gradient_state,
+    logits_of,
+    make_network,
+    sample_actions,
+)
+from smjax.agents.smdp import episodes_with_decision, smdp_gae
+
+
+@dataclass(frozen=True)
+class ActorCriticConfig:
+    learning_rate: float = 1e-3
+    gamma: float = 0.99
+    hidden_sizes: tuple[int, ...] = (100,)
+    activation: str = "relu"
+    shared_torso: bool = False
+    epsilon_decay: float = 5e-3      # epsilon = max(epsilon_min, exp(-epsilon_decay * episodes))
+    epsilon_min: float = 0.0
+    vf_coef: float = 0.5
+    ent_coef: float = 0.0
+    max_grad_norm: float = 0.0       # 0 disables clipping (the reference did not clip)
+    normalize_advantages: bool = False
+    bootstrap_at_rollout_end: bool = True
+
+    def __post_init__(self):
+        checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
+        checks.check_range(self, "gamma", 0.0, 1.0)
+        checks.check_hidden_sizes(self)
+        checks.check_choice(self, "activation", ("tanh", "relu", "gelu", "elu", "swish"))
+        checks.check_range(self, "epsilon_decay", 0.0)
+        checks.check_range(self, "epsilon_min", 0.0, 1.0)
+        checks.check_range(self, "vf_coef", 0.0)
+        checks.check_range(self, "ent_coef", 0.0)
+        checks.check_range(self, "max_grad_norm", 0.0)
+
+
+def exploration_epsilon(config: ActorCriticConfig, episodes_seen: jax.Array) -> jax.Array:
+    decayed = jnp.exp(-config.epsilon_decay * episodes_seen.astype(jnp.float32))
+    return jnp.maximum(decayed, config.epsilon_min)
+
+
+def make_agent(config: ActorCriticConfig | None = None) -> Agent:
+    config = ActorCriticConfig() if config is None else config
+    adam = optax.adam(config.learning_rate)
+    optimizer = (
+        optax.chain(optax.clip_by_global_norm(config.max_grad_norm), adam)
+        if config.max_grad_norm > 0
+        else adam
+    )
+
+    def network_for(num_actions: int):
+        return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso)
+
+    def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
+        return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions)
+
+    def act(state: PolicyGradientState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
+        epsilon = exploration_epsilon(config, state.episodes_seen)
+        return sample_actions(network_for, state.params, obs, mask, key, epsilon)
+
+    def policy_logits(params, obs: jax.Array) -> jax.Array:
+        return logits_of(network_for, params, obs)
+
+    def loss_fn(params, obs, action, mask, returns, weight):
+        logits, value = network_for(mask.shape[-1]).apply(params, obs)
+        log_prob = take_action(masked_log_softmax(logits, mask), action)
+        advantage = jax.lax.stop_gradient(returns - value)
+        if config.normalize_advantages:
+            mean = masked_mean(advantage, weight)
+            std = jnp.sqrt(masked_mean(jnp.square(advantage - mean), weight))
+            advantage = (advantage - mean) / (std + 1e-8)
+        policy_loss = masked_mean(-log_prob * advantage, weight)
+        value_loss = 0.5 * masked_mean(jnp.square(value - returns), weight)
+        entropy = masked_mean(masked_entropy(logits, mask), weight)
+        total = policy_loss + config.vf_coef * value_loss - config.ent_coef * entropy
+        return total, {"policy_loss": policy_loss, "value_loss": value_loss, "entropy": entropy}
+
+    def update(state: PolicyGradientState, traj: Transition, last_obs: jax.Array, key: jax.Array):
+        del key  # the update is deterministic given the rollout
+        num_ticks, num_envs = traj.reward.shape[:2]
+        decision = traj.decision.astype(bool)
+        if config.bootstrap_at_rollout_end:
+            _, last_value = network_for(traj.action_mask.shape[-1]).apply(
+                state.params, flatten_obs(last_obs))
+        else:
+            last_value = jnp.zeros((num_envs,), jnp.float32)
+        _, returns = smdp_gae(traj.reward, traj.discount, traj.done, decision, traj.value,
+                              last_value, 1.0)
+        num_items = num_ticks * num_envs
+        obs = flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1)
+        action = traj.action.reshape(num_items).astype(jnp.int32)
+        mask = traj.action_mask.reshape(num_items, -1).astype(bool)
+        weight = decision.reshape(num_items)
+        (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(
+            state.params, obs, action, mask, returns.reshape(num_items), weight)
+        updates, new_opt_state = optimizer.update(grads, state.opt_state, state.params)
+        new_params = optax.apply_updates(state.params, updates)
+        # With no decision in the rollout there is nothing to learn; do not let Adam's
+        # moments drift on a zero gradient.
+        has_decision = jnp.any(decision)
+        params, opt_state = jax.tree.map(
+            lambda n, o: jnp.where(has_decision, n, o),
+            (new_params, new_opt_state), (state.params, state.opt_state))
+        num_decisions = decision.sum().astype(jnp.int32)
+        new_state = PolicyGradientState(
+            params=params,
+            opt_state=opt_state,
+            grad_steps=state.grad_steps + has_decision.astype(jnp.int32),
+            updates=state.updates + 1,
+            episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
+            decisions_seen=state.decisions_seen + num_decisions,
+        )
+        metrics = dict(aux, total_loss=total, decisions=num_decisions,
+                       mean_return=masked_mean(returns, decision),
+                       episodes_seen=new_state.episodes_seen,
+                       epsilon=exploration_epsilon(config, new_state.episodes_seen),
+                       grad_steps=new_state.grad_steps)
+        return new_state, metrics
+
+    return Agent("actor-critic", init, act, update, policy_logits)

@@ -1,0 +1,255 @@
+"""DQN over SMDP decisions, with the replay buffer held as arrays in the agent state.
+
+Each ``update`` call turns the rollout into SMDP transitions (one per learner decision,
+see :func:`smjax.agents.smdp.smdp_transitions`), writes them into a fixed-capacity
+circular buffer, then takes ``gradient_steps_per_update`` gradient steps on uniformly
+sampled minibatches. The target of a transition is
+
+    R + D * (1 - terminal) * max_{a' allowed at s'} Q_target(s', a')
+
+with R the discounted reward sum of the ticks until the next decision and D the product
+of their discounts (gamma**k, or gamma**d for teleported template calls); the stored
+action mask of the next decision restricts the max (double DQN: argmax by the online
+network, value by the target network). A decision still pending at the rollout end is
+stored with ``s' = last_obs`` and all actions allowed (its true mask is unknown) when
+``store_incomplete`` is True, and dropped otherwise.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+import optax
+
+from smjax.agents import config as checks
+from smjax.agents.base import ActOutput, Agent, Transition
+from smjax.agents.networks import (
+    QNetwork,
+    epsilon_greedy_log_probs,
+    flatten_obs,
+    greedy_masked,
+    masked_logits,
+    sample_from_log_probs,
+    take_action,
+    uniform_allowed_probs,
+)
+from smjax.agents.smdp import episodes_with_decision, smdp_transitions
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    learning_rate: float = 2.5e-4
+    gamma: float = 0.99               # for the trainer's Transition.discount; not read here
+    hidden_sizes: tuple[int, ...] = (64, 64)
+    activation: str = "relu"
+    buffer_capacity: int = 10_000
+    batch_size: int = 64
+    gradient_steps_per_update: int = 1
+    learning_starts: int = 1_000      # transitions in the buffer before the first step
+    target_update_period: int = 100   # gradient steps between target updates
+    tau: float = 1.0                  # 1 = hard copy; < 1 = Polyak averaging
+    epsilon_start: float = 1.0
+    epsilon_end: float = 0.05
+    epsilon_decay_steps: int = 10_000
+    epsilon_schedule_unit: str = "decisions"   # or "gradient_steps"
+    double_dqn: bool = True
+    huber_loss: bool = True
+    max_grad_norm: float = 10.0
+    store_incomplete: bool = True
+
+    def __post_init__(self):
+        checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
+        checks.check_range(self, "gamma", 0.0, 1.0)
+        checks.check_hidden_sizes(self)
+        checks.check_choice(self, "activation", ("tanh", "relu", "gelu", "elu", "swish"))
+        for name in ("buffer_capacity", "batch_size", "gradient_steps_per_update",
+                     "target_update_period", "epsilon_decay_steps"):
+            checks.check_positive_int(self, name)
+        checks.check_non_negative_int(self, "learning_starts")
+        checks.check_range(self, "tau", 0.0, 1.0, low_open=True)
+        checks.check_range(self, "epsilon_start", 0.0, 1.0)
+        checks.check_range(self, "epsilon_end", 0.0, 1.0)
+        checks.check_choice(self, "epsilon_schedule_unit", ("decisions", "gradient_steps"))
+        checks.check_range(self, "max_grad_norm", 0.0, low_open=True)
+
+
+@flax.struct.dataclass
+class ReplayBuffer:
+    obs: jax.Array          # [C, *obs_shape], the observation dtype
+    action: jax.Array       # [C] int32
+    reward: jax.Array       # [C] SMDP reward sum
+    discount: jax.Array     # [C] product of the tick discounts until the next decision
+    terminal: jax.Array     # [C] bool
+    next_obs: jax.Array     # [C, *obs_shape]
+    next_mask: jax.Array    # [C, A] bool
+    size: jax.Array         # int32 scalar
+    insert_pos: jax.Array   # int32 scalar, next slot to write
+
+
+@flax.struct.dataclass
+class DQNState:
+    params: Any
+    target_params: Any
+    opt_state: Any
+    buffer: ReplayBuffer
+    grad_steps: jax.Array
+    updates: jax.Array
+    episodes_seen: jax.Array
+    decisions_seen: jax.Array
+
+
+def linear_epsilon(config: DQNConfig, grad_steps: jax.Array, decisions_seen: jax.Array) -> jax.Array:
+    progress = grad_steps if config.epsilon_schedule_unit == "gradient_steps" else decisions_seen
+    frac = jnp.clip(progress.astype(jnp.float32) / config.epsilon_decay_steps, 0.0, 1.0)
+    return config.epsilon_start + frac * (config.epsilon_end - config.epsilon_start)
+
+
+def insert(buffer: ReplayBuffer, items: dict, valid: jax.Array) -> ReplayBuffer:
+    """Write the ``valid`` rows of ``items`` (leading axis N) at the circular write position.
+
+    With more valid rows than capacity only the last ``capacity`` are kept, so every write
+    position is distinct and the result does not depend on scatter order.
+    """
+    capacity = buffer.action.shape[0]
+    valid = valid.astype(bool)
+    rank = jnp.cumsum(valid.astype(jnp.int32)) - 1
+    count = valid.sum().astype(jnp.int32)
+    keep = jnp.logical_and(valid, rank >= count - capacity)
+    pos = jnp.where(keep, (buffer.insert_pos + rank) % capacity, capacity)  # capacity = dropped
+    written = {
+        name: getattr(buffer, name).at[pos].set(value.astype(getattr(buffer, name).dtype), mode="drop")
+        for name, value in items.items()
+    }
+    return buffer.replace(
+        **written,
+        size=jnp.minimum(buffer.size + count, capacity),
+        insert_pos=(buffer.insert_pos + count) % capacity,
+    )
+
+
+def smdp_td_targets(q_next_online, q_next_target, reward, discount, terminal, next_mask, double_dqn):
+    """``R + D * (1 - terminal) * Q_target(s', a*)`` with a* the best allowed next action."""
+    if double_dqn:
+        best = greedy_masked(q_next_online, next_mask)
+    else:
+        best = greedy_masked(q_next_target, next_mask)
+    q_next = take_action(q_next_target, best)
+    q_next = jnp.where(jnp.any(next_mask, axis=-1), q_next, 0.0)
+    return reward + discount * (1.0 - terminal.astype(jnp.float32)) * q_next
+
+
+def make_agent(config: DQNConfig | None = None) -> Agent:
+    config = DQNConfig() if config is None else config
+    optimizer = optax.chain(
+        optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
+    )
+
+    def network_for(num_actions: int) -> QNetwork:
+        return QNetwork(num_actions, tuple(config.hidden_sizes), config.activation)
+
+    def q_values(params, obs: jax.Array) -> jax.Array:
+        num_actions = params["params"]["q_head"]["kernel"].shape[-1]
+        return network_for(num_actions).apply(params, flatten_obs(obs))
+
+    def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> DQNState:
+        example_obs = jnp.asarray(example_obs)
+        params = network_for(int(num_actions)).init(key, flatten_obs(example_obs[None]))
+        cap = config.buffer_capacity
+        obs_buf = jnp.zeros((cap,) + example_obs.shape, example_obs.dtype)
+        buffer = ReplayBuffer(
+            obs=obs_buf, action=jnp.zeros((cap,), jnp.int32), reward=jnp.zeros((cap,), jnp.float32),
+            discount=jnp.zeros((cap,), jnp.float32), terminal=jnp.zeros((cap,), bool),
+            next_obs=obs_buf, next_mask=jnp.ones((cap, int(num_actions)), bool),
+            size=jnp.zeros((), jnp.int32), insert_pos=jnp.zeros((), jnp.int32),
+        )
+        zero = jnp.zeros((), jnp.int32)
+        return DQNState(params, params, optimizer.init(params), buffer, zero, zero, zero, zero)
+
+    def act(state: DQNState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
+        q = q_values(state.params, obs)
+        epsilon = linear_epsilon(config, state.grad_steps, state.decisions_seen)
+        key_explore, key_random = jax.random.split(key)
+        random_action = sample_from_log_probs(key_random, jnp.log(uniform_allowed_probs(mask)), mask)
+        explore = jax.random.uniform(key_explore, mask.shape[:-1]) < epsilon
+        action = jnp.where(explore, random_action, greedy_masked(q, mask))
+        log_prob = take_action(epsilon_greedy_log_probs(q, mask, epsilon), action)
+        value = jnp.max(masked_logits(q, mask), axis=-1)
+        return ActOutput(action, log_prob, value)
+
+    def loss_fn(params, target_params, batch):
+        q = take_action(q_values(params, batch["obs"]), batch["action"])
+        q_next_target = q_values(target_params, batch["next_obs"])
+        q_next_online = q_values(params, batch["next_obs"]) if config.double_dqn else q_next_target
+        target = jax.lax.stop_gradient(smdp_td_targets(
+            q_next_online, q_next_target, batch["reward"], batch["discount"], batch["terminal"],
+            batch["next_mask"], config.double_dqn))
+        td = q - target
+        per_item = optax.huber_loss(q, target) if config.huber_loss else 0.5 * jnp.square(td)
+        return per_item.mean(), (q.mean(), jnp.abs(td).mean())
+
+    def gradient_step(state: DQNState, key: jax.Array):
+        buffer = state.buffer
+        ready = buffer.size >= jnp.maximum(config.learning_starts, 1)
+        idx = jax.random.randint(key, (config.batch_size,), 0, jnp.maximum(buffer.size, 1))
+        batch = {name: getattr(buffer, name)[idx] for name in
+                 ("obs", "action", "reward", "discount", "terminal", "next_obs", "next_mask")}
+        (loss, (mean_q, td_abs)), grads = jax.value_and_grad(loss_fn, has_aux=True)(
+            state.params, state.target_params, batch)
+        updates, opt_state = optimizer.update(grads, state.opt_state, state.params)
+        params = optax.apply_updates(state.params, updates)
+        grad_steps = state.grad_steps + 1
+        sync = grad_steps % config.target_update_period == 0
+        target = jax.tree.map(
+            lambda t, p: jnp.where(sync, config.tau * p + (1.0 - config.tau) * t, t),
+            state.target_params, params)
+        # Before learning_starts nothing changes (the buffer is still filling). Select only
+        # the learned parts: a select over the buffer would copy it on every step.
+        params, target, opt_state, grad_steps = jax.tree.map(
+            lambda n, o: jnp.where(ready, n, o),
+            (params, target, opt_state, grad_steps),
+            (state.params, state.target_params, state.opt_state, state.grad_steps))
+        new_state = state.replace(params=params, target_params=target, opt_state=opt_state,
+                                  grad_steps=grad_steps)
+        metrics = {"loss": loss, "mean_q": mean_q, "td_error_abs": td_abs,
+                   "stepped": ready.astype(jnp.float32)}
+        return new_state, metrics
+
+    def update(state: DQNState, traj: Transition, last_obs: jax.Array, key: jax.Array):
+        num_ticks, num_envs = traj.reward.shape[:2]
+        num_items = num_ticks * num_envs
+        decision = traj.decision.astype(bool)
+        tr = smdp_transitions(traj.reward, traj.discount, traj.done, decision,
+                              traj.obs, traj.action_mask, last_obs)
+        valid = decision if config.store_incomplete else jnp.logical_and(decision, tr.complete)
+        flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
+        items = {"obs": flat(traj.obs), "action": flat(traj.action), "reward": flat(tr.reward),
+                 "discount": flat(tr.discount), "terminal": flat(tr.terminal),
+                 "next_obs": flat(tr.next_obs), "next_mask": flat(tr.next_mask)}
+        num_decisions = decision.sum().astype(jnp.int32)
+        state = state.replace(
+            buffer=insert(state.buffer, items, flat(valid)),
+            decisions_seen=state.decisions_seen + num_decisions,
+            episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
+            updates=state.updates + 1,
+        )
+        keys = jax.random.split(key, config.gradient_steps_per_update)
+        state, step_metrics = jax.lax.scan(gradient_step, state, keys)
+        stepped = step_metrics.pop("stepped")
+        denom = jnp.maximum(stepped.sum(), 1.0)
+        metrics = {name: jnp.sum(v * stepped) / denom for name, v in step_metrics.items()}
+        metrics.update(
+            decisions=num_decisions,
+            buffer_size=state.buffer.size,
+            epsilon=linear_epsilon(config, state.grad_steps, state.decisions_seen),
+            episodes_seen=state.episodes_seen,
+            grad_steps=state.grad_steps,
+        )
+        return state, metrics
+
+    def policy_logits(params, obs: jax.Array) -> jax.Array:
+        return q_values(params, obs)
+
+    return Agent("dqn", init, act, update, policy_logits)

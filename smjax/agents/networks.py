@@ -1,0 +1,167 @@
+"""Networks shared by the learners, and the masked action distributions built on them.
+
+Every network takes a *flat* float32 batch ``[N, F]``; :func:`flatten_obs` turns any
+observation batch (uint8 grids, bool masks, float vectors) into that form. Keeping the
+input flat means ``policy_logits(params, obs)`` needs nothing but the params, which is
+what lets the trainer stack several learned policies into one "policy bank" pytree.
+
+Masking: a masked action gets the logit :data:`MASKED_LOGIT`, a large *finite* negative
+number. Its softmax probability is exactly 0 in float32, and unlike ``-inf`` it keeps
+entropies and log-probabilities finite even when a whole row is masked (ticks where the
+learner does not decide may carry an all-False mask).
+"""
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+MASKED_LOGIT = -1e9
+
+ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
+    "tanh": jnp.tanh,
+    "relu": nn.relu,
+    "gelu": nn.gelu,
+    "elu": nn.elu,
+    "swish": nn.swish,
+}
+
+
+def activation_by_name(name: str) -> Callable[[jax.Array], jax.Array]:
+    if name not in ACTIVATIONS:
+        raise ValueError(f"unknown activation {name!r}; valid: {', '.join(sorted(ACTIVATIONS))}")
+    return ACTIVATIONS[name]
+
+
+def flatten_obs(obs: jax.Array, batch_dims: int = 1) -> jax.Array:
+    """Cast to float32 and merge every non-batch axis: ``[*batch, ...] -> [*batch, F]``."""
+    obs = jnp.asarray(obs)
+    lead = obs.shape[:batch_dims]
+    return obs.reshape(lead + (-1,)).astype(jnp.float32)
+
+
+def _dense(features: int, scale: float, name: str | None = None) -> nn.Dense:
+    # Orthogonal init with per-layer gains (sqrt(2) hidden, 0.01 policy, 1.0 value) is the
+    # standard PPO recipe: small initial logits give a near-uniform starting policy.
+    return nn.Dense(
+        features,
+        kernel_init=nn.initializers.orthogonal(scale),
+        bias_init=nn.initializers.constant(0.0),
+        name=name,
+    )
+
+
+class MLP(nn.Module):
+    """Stack of dense layers with an activation after each."""
+
+    hidden_sizes: Sequence[int]
+    activation: str = "tanh"
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        act = activation_by_name(self.activation)
+        for size in self.hidden_sizes:
+            x = act(_dense(size, float(np.sqrt(2)))(x))
+        return x
+
+
+class ActorCritic(nn.Module):
+    """Actor logits ``[N, A]`` and state values ``[N]`` from flat observations ``[N, F]``.
+
+    ``shared_torso=True`` feeds both heads from one MLP; otherwise actor and critic have
+    their own MLP of the same shape (PPO's usual choice, and the paper's learner).
+    """
+
+    num_actions: int
+    hidden_sizes: Sequence[int] = (64, 64)
+    activation: str = "tanh"
+    shared_torso: bool = False
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> tuple[jax.Array, jax.Array]:
+        if self.shared_torso:
+            features = MLP(self.hidden_sizes, self.activation, name="torso")(x)
+            actor_features = critic_features = features
+        else:
+            actor_features = MLP(self.hidden_sizes, self.activation, name="actor_torso")(x)
+            critic_features = MLP(self.hidden_sizes, self.activation, name="critic_torso")(x)
+        logits = _dense(self.num_actions, 0.01, name="policy_head")(actor_features)
+        value = _dense(1, 1.0, name="value_head")(critic_features)
+        return logits, value[..., 0]
+
+
+class QNetwork(nn.Module):
+    """Action values ``[N, A]`` from flat observations ``[N, F]``."""
+
+    num_actions: int
+    hidden_sizes: Sequence[int] = (64, 64)
+    activation: str = "relu"
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        features = MLP(self.hidden_sizes, self.activation, name="torso")(x)
+        return _dense(self.num_actions, 1.0, name="q_head")(features)
+
+
+# ---- masked action distributions --------------------------------------------------
+
+def masked_logits(logits: jax.Array, mask: jax.Array) -> jax.Array:
+    return jnp.where(mask, logits, MASKED_LOGIT)
+
+
+def masked_log_softmax(logits: jax.Array, mask: jax.Array) -> jax.Array:
+    return jax.nn.log_softmax(masked_logits(logits, mask), axis=-1)
+
+
+def masked_entropy(logits: jax.Array, mask: jax.Array) -> jax.Array:
+    """Entropy of the masked softmax; masked actions contribute exactly 0."""
+    log_p = masked_log_softmax(logits, mask)
+    p = jnp.exp(log_p)
+    return -jnp.sum(jnp.where(mask, p * log_p, 0.0), axis=-1)
+
+
+def uniform_allowed_probs(mask: jax.Array) -> jax.Array:
+    """Uniform distribution over the allowed actions (all actions if none is allowed)."""
+    mask_f = mask.astype(jnp.float32)
+    count = mask_f.sum(-1, keepdims=True)
+    # An all-False row (a tick where the learner has no choice) falls back to uniform
+    # over everything so probabilities stay well defined; the caller ignores that action.
+    return jnp.where(count > 0, mask_f / jnp.maximum(count, 1.0), 1.0 / mask.shape[-1])
+
+
+def epsilon_mixture_log_probs(
+    base_log_probs: jax.Array, mask: jax.Array, epsilon: jax.Array
+) -> jax.Array:
+    """Log-probabilities of "with prob. epsilon uniform over allowed, else base"."""
+    mixed = (1.0 - epsilon) * jnp.exp(base_log_probs) + epsilon * uniform_allowed_probs(mask)
+    return jnp.log(jnp.maximum(mixed, 1e-30))
+
+
+def sample_from_log_probs(key: jax.Array, log_probs: jax.Array, mask: jax.Array) -> jax.Array:
+    """Sample ``[N]`` int32 actions; masked actions are excluded even if rounding leaks mass."""
+    return jax.random.categorical(key, masked_logits(log_probs, mask), axis=-1).astype(jnp.int32)
+
+
+def greedy_masked(scores: jax.Array, mask: jax.Array) -> jax.Array:
+    return jnp.argmax(masked_logits(scores, mask), axis=-1).astype(jnp.int32)
+
+
+def epsilon_greedy_log_probs(scores: jax.Array, mask: jax.Array, epsilon: jax.Array) -> jax.Array:
+    """Log-probabilities of epsilon-greedy over allowed actions (greedy = masked argmax)."""
+    greedy = jax.nn.one_hot(greedy_masked(scores, mask), scores.shape[-1])
+    probs = (1.0 - epsilon) * greedy + epsilon * uniform_allowed_probs(mask)
+    return jnp.log(jnp.maximum(probs, 1e-30))
+
+
+def masked_mean(values: jax.Array, weights: jax.Array) -> jax.Array:
+    """Mean of ``values`` over entries with weight 1 (0 if there are none, never NaN)."""
+    weights = weights.astype(jnp.float32)
+    return jnp.sum(values * weights) / jnp.maximum(jnp.sum(weights), 1.0)
+
+
+def take_action(per_action: jax.Array, action: jax.Array) -> jax.Array:
+    """``per_action[..., action]`` for a batch of int actions."""
+    return jnp.take_along_axis(per_action, action[..., None].astype(jnp.int32), axis=-1)[..., 0]

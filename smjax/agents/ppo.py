@@ -1,0 +1,241 @@
+"""PPO for discrete, masked actions over SMDP decisions.
+
+The rollout ``Transition[T, B]`` holds every tick; only ticks with ``decision`` train:
+every loss term is a mean over decision ticks (non-decision ticks weigh 0), advantages
+come from :func:`smjax.agents.smdp.smdp_gae` and are normalised over decisions only.
+Minibatches are drawn from the T*B ticks (so a minibatch may hold few decisions when the
+learner decides rarely; the masked mean keeps each minibatch's loss a proper average,
+and a minibatch without any decision leaves the parameters and optimiser untouched).
+
+``gamma`` is not read by the update: the per-tick discounts arrive in
+``Transition.discount``. It is part of the config so that the trainer building those
+discounts has a single place to read it from.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+import optax
+
+from smjax.agents import config as checks
+from smjax.agents.base import ActOutput, Agent, Transition
+from smjax.agents.networks import (
+    ActorCritic,
+    epsilon_mixture_log_probs,
+    flatten_obs,
+    masked_entropy,
+    masked_log_softmax,
+    masked_mean,
+    sample_from_log_probs,
+    take_action,
+)
+from smjax.agents.smdp import episodes_with_decision, smdp_gae
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    learning_rate: float = 2.5e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_eps: float = 0.2
+    ent_coef: float = 0.01
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    update_epochs: int = 4
+    num_minibatches: int = 4
+    hidden_sizes: tuple[int, ...] = (64, 64)
+    activation: str = "tanh"
+    shared_torso: bool = False
+    normalize_advantages: bool = True
+    clip_value_loss: bool = True
+    adam_eps: float = 1e-5
+
+    def __post_init__(self):
+        checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
+        checks.check_range(self, "gamma", 0.0, 1.0)
+        checks.check_range(self, "gae_lambda", 0.0, 1.0)
+        checks.check_range(self, "clip_eps", 0.0, 1.0, low_open=True)
+        checks.check_range(self, "ent_coef", 0.0)
+        checks.check_range(self, "vf_coef", 0.0)
+        checks.check_range(self, "max_grad_norm", 0.0, low_open=True)
+        checks.check_positive_int(self, "update_epochs")
+        checks.check_positive_int(self, "num_minibatches")
+        checks.check_hidden_sizes(self)
+        checks.check_choice(self, "activation", ("tanh", "relu", "gelu", "elu", "swish"))
+        checks.check_range(self, "adam_eps", 0.0, low_open=True)
+
+
+@flax.struct.dataclass
+class PolicyGradientState:
+    """Learner state of PPO and the actor-critic (counters are int32 scalars)."""
+
+    params: Any
+    opt_state: Any
+    grad_steps: jax.Array
+    updates: jax.Array
+    episodes_seen: jax.Array
+    decisions_seen: jax.Array
+
+
+def make_network(num_actions: int, hidden_sizes, activation: str, shared_torso: bool):
+    return ActorCritic(num_actions, tuple(hidden_sizes), activation, shared_torso)
+
+
+def init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions):
+    """Shared ``init`` of the actor-critic-network learners."""
+    network = network_for(int(num_actions))
+    params = network.init(key, flatten_obs(jnp.asarray(example_obs)[None]))
+    zero = jnp.zeros((), jnp.int32)
+    return PolicyGradientState(params, optimizer.init(params), zero, zero, zero, zero)
+
+
+def num_actions_of(params) -> int:
+    return params["params"]["policy_head"]["kernel"].shape[-1]
+
+
+def sample_actions(network_for, params, obs, mask, key, epsilon=None) -> ActOutput:
+    """Sample from ``(1 - epsilon) * pi + epsilon * uniform(allowed)``; never a masked action.
+
+    ``epsilon=None`` samples from pi itself (exact log-probabilities, as PPO's ratio needs).
+    """
+    network = network_for(num_actions_of(params))
+    logits, value = network.apply(params, flatten_obs(obs))
+    log_probs = masked_log_softmax(logits, mask)
+    if epsilon is not None:
+        log_probs = epsilon_mixture_log_probs(log_probs, mask, epsilon)
+    action = sample_from_log_probs(key, log_probs, mask)
+    return ActOutput(action, take_action(log_probs, action), value)
+
+
+def logits_of(network_for, params, obs) -> jax.Array:
+    logits, _ = network_for(num_actions_of(params)).apply(params, flatten_obs(obs))
+    return logits
+
+
+def minibatch_indices(key: jax.Array, num_items: int, num_minibatches: int):
+    """Shuffled indices ``[M, S]`` covering all items, plus a weight of 0 for padding."""
+    size = -(-num_items // num_minibatches)
+    pad = num_minibatches * size - num_items
+    perm = jax.random.permutation(key, num_items)
+    idx = jnp.concatenate([perm, jnp.zeros((pad,), perm.dtype)])
+    real = jnp.concatenate([jnp.ones((num_items,), bool), jnp.zeros((pad,), bool)])
+    return idx.reshape(num_minibatches, size), real.reshape(num_minibatches, size)
+
+
+def apply_if(pred: jax.Array, new: Any, old: Any) -> Any:
+    """Keep ``old`` when ``pred`` is False (a step with nothing to learn from)."""
+    return jax.tree.map(lambda n, o: jnp.where(pred, n, o), new, old)
+
+
+def make_agent(config: PPOConfig | None = None) -> Agent:
+    config = PPOConfig() if config is None else config
+    optimizer = optax.chain(
+        optax.clip_by_global_norm(config.max_grad_norm),
+        optax.adam(config.learning_rate, eps=config.adam_eps),
+    )
+
+    def network_for(num_actions: int) -> ActorCritic:
+        return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso)
+
+    def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
+        return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions)
+
+    def act(state: PolicyGradientState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
+        return sample_actions(network_for, state.params, obs, mask, key)
+
+    def policy_logits(params, obs: jax.Array) -> jax.Array:
+        return logits_of(network_for, params, obs)
+
+    def loss_fn(params, batch):
+        obs, action, mask, old_log_prob, old_value, adv, ret, weight = batch
+        logits, value = network_for(mask.shape[-1]).apply(params, obs)
+        log_prob = take_action(masked_log_softmax(logits, mask), action)
+        log_ratio = log_prob - old_log_prob
+        ratio = jnp.exp(log_ratio)
+        clipped = jnp.clip(ratio, 1.0 - config.clip_eps, 1.0 + config.clip_eps)
+        policy_loss = masked_mean(-jnp.minimum(ratio * adv, clipped * adv), weight)
+        value_err = jnp.square(value - ret)
+        if config.clip_value_loss:
+            value_clipped = old_value + jnp.clip(value - old_value, -config.clip_eps, config.clip_eps)
+            value_err = jnp.maximum(value_err, jnp.square(value_clipped - ret))
+        value_loss = 0.5 * masked_mean(value_err, weight)
+        entropy = masked_mean(masked_entropy(logits, mask), weight)
+        total = policy_loss + config.vf_coef * value_loss - config.ent_coef * entropy
+        aux = {
+            "policy_loss": policy_loss,
+            "value_loss": value_loss,
+            "entropy": entropy,
+            # (r - 1) - log r: a low-variance, non-negative estimate of KL(old || new).
+            "approx_kl": masked_mean((ratio - 1.0) - log_ratio, weight),
+            "clip_fraction": masked_mean((jnp.abs(ratio - 1.0) > config.clip_eps).astype(jnp.float32), weight),
+        }
+        return total, aux
+
+    def update(state: PolicyGradientState, traj: Transition, last_obs: jax.Array, key: jax.Array):
+        num_ticks, num_envs = traj.reward.shape[:2]
+        num_items = num_ticks * num_envs
+        decision = traj.decision.astype(bool)
+        _, last_value = network_for(traj.action_mask.shape[-1]).apply(state.params, flatten_obs(last_obs))
+        adv, ret = smdp_gae(traj.reward, traj.discount, traj.done, decision, traj.value,
+                            last_value, config.gae_lambda)
+        if config.normalize_advantages:
+            mean = masked_mean(adv, decision)
+            var = masked_mean(jnp.square(adv - mean), decision)
+            adv = jnp.where(decision, (adv - mean) / (jnp.sqrt(var) + 1e-8), 0.0)
+        flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
+        data = (
+            flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1),
+            flat(traj.action).astype(jnp.int32),
+            flat(traj.action_mask).astype(bool),
+            flat(traj.log_prob).astype(jnp.float32),
+            flat(traj.value).astype(jnp.float32),
+            flat(adv),
+            flat(ret),
+            flat(decision),
+        )
+
+        def minibatch_step(carry, mb):
+            params, opt_state, grad_steps = carry
+            idx, real = mb
+            batch = jax.tree.map(lambda x: x[idx], data)
+            batch = batch[:-1] + (jnp.logical_and(batch[-1], real),)
+            (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch)
+            updates, new_opt_state = optimizer.update(grads, opt_state, params)
+            new_params = optax.apply_updates(params, updates)
+            has_decision = jnp.any(batch[-1])
+            params, opt_state = apply_if(has_decision, (new_params, new_opt_state), (params, opt_state))
+            aux = dict(aux, total_loss=total, counted=has_decision.astype(jnp.float32))
+            return (params, opt_state, grad_steps + has_decision.astype(jnp.int32)), aux
+
+        def epoch_step(carry, epoch_key):
+            idx, real = minibatch_indices(epoch_key, num_items, config.num_minibatches)
+            return jax.lax.scan(minibatch_step, carry, (idx, real))
+
+        carry = (state.params, state.opt_state, state.grad_steps)
+        epoch_keys = jax.random.split(key, config.update_epochs)
+        (params, opt_state, grad_steps), aux = jax.lax.scan(epoch_step, carry, epoch_keys)
+        counted = aux.pop("counted")
+        metrics = {name: masked_mean(value, counted) for name, value in aux.items()}
+        num_decisions = decision.sum().astype(jnp.int32)
+        new_state = PolicyGradientState(
+            params=params,
+            opt_state=opt_state,
+            grad_steps=grad_steps,
+            updates=state.updates + 1,
+            episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
+            decisions_seen=state.decisions_seen + num_decisions,
+        )
+        metrics.update(
+            decisions=num_decisions,
+            mean_advantage=masked_mean(adv, decision),
+            mean_return=masked_mean(ret, decision),
+            episodes_seen=new_state.episodes_seen,
+            grad_steps=grad_steps,
+        )
+        return new_state, metrics
+
+    return Agent("ppo", init, act, update, policy_logits)
