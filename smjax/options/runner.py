@@ -1,0 +1,307 @@
+"""The hierarchical tick: one primitive environment step for every environment.
+
+In each tick, for each environment, options on the execution stack decide from the top
+down until a primitive action is fixed: the learner (the option being trained) samples
+from its own policy, learned options use their frozen policy from the *policy bank*, an
+unlearned template on the stack plays its scripted controller, and calling an
+unlearned template that has a teleport jumps the state (the jump and its primitive
+action are that tick's single environment step). After the step, every stack entry
+whose template is satisfied or out of ticks is popped (with everything above it).
+
+Only the learner's own choices become training transitions (``decision``); its reward
+is the environment's reward when it is the root option, else ``satisfied`` of its
+template (F_o); the per-tick discount is gamma, or gamma**d for a teleported call.
+The machinery is generic: it sees the environment only through ``reset_env``,
+``step_env`` and the templates of a :class:`~smjax.options.Hierarchy`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from smjax.agents.base import Transition
+from smjax.core.env import select_tree
+from smjax.options.hierarchy import Hierarchy
+from smjax.options.stack import (
+    ExecutionStack, stack_contains, stack_init, stack_push, stack_tick, stack_top, stack_truncate,
+)
+
+NO_OPTION = -1
+_NEVER = np.iinfo(np.int32).max // 2
+
+
+@struct.dataclass
+class EnvCarry:
+    """Per-environment rollout state (leading axis B)."""
+
+    env_state: Any
+    obs: jax.Array
+    stack: ExecutionStack
+    learner_started: jax.Array  # bool: the learner has acted in this episode
+    learner_return: jax.Array   # float: learner reward collected in this episode
+
+
+@struct.dataclass
+class EpisodeEnds:
+    """Per-environment episode bookkeeping of one tick (leading axis B)."""
+
+    reset: jax.Array     # bool: the environment was reset after this tick (every reset counts)
+    finished: jax.Array  # bool: an episode in which the learner acted ended
+    ret: jax.Array       # float: that episode's learner return (0 where not finished)
+    success: jax.Array   # float: that episode's success (0 where not finished)
+    decided: jax.Array   # bool: the learner decided in this tick
+
+
+@struct.dataclass
+class TickStats:
+    """Sums over the batch (and over ticks once reduced)."""
+
+    env_episodes: jax.Array
+    learner_episodes: jax.Array
+    learner_return: jax.Array
+    learner_success: jax.Array
+    learner_decisions: jax.Array
+
+    @staticmethod
+    def of(ends: EpisodeEnds) -> "TickStats":
+        return TickStats(
+            env_episodes=ends.reset.sum(-1).astype(jnp.int32),
+            learner_episodes=ends.finished.sum(-1).astype(jnp.int32),
+            learner_return=ends.ret.sum(-1),
+            learner_success=ends.success.sum(-1),
+            learner_decisions=ends.decided.sum(-1).astype(jnp.int32),
+        )
+
+
+@dataclass(frozen=True)
+class Controls:
+    """Traced per-run controls of the tick (all arrays, so one compile serves every level).
+
+    learner: option id being trained (NO_OPTION: evaluation, nobody learns).
+    start: option placed at the bottom of the stack at each reset (0 = root; a template
+      id starts that template directly from reset states, as bottom-up training does).
+    learned: bool [num_options], options whose frozen policy is in the bank.
+    """
+
+    learner: jax.Array
+    start: jax.Array
+    learned: jax.Array
+
+
+class HierarchyRunner:
+    """Compiles a hierarchy over an environment into batched tick/reset functions."""
+
+    def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, gamma: float,
+                 frozen_policy: str = "greedy", allow_teleport: bool = True,
+                 reset_on_learner_end: bool = True):
+        if frozen_policy not in ("greedy", "sample"):
+            raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {frozen_policy!r}")
+        self.env, self.env_params, self.h, self.agent = env, env_params, hierarchy, agent
+        self.gamma = float(gamma)
+        self.frozen_policy = frozen_policy
+        self.allow_teleport = bool(allow_teleport)
+        self.reset_on_learner_end = bool(reset_on_learner_end)
+        tpls = hierarchy.template_list
+        self.templates = tpls
+        self.P = hierarchy.num_primitives
+        self.D = hierarchy.stack_depth
+        self.child_mask = jnp.asarray(hierarchy.child_mask())
+        self.k_max = jnp.asarray([_NEVER] + [t.k_max for t in tpls], jnp.int32)
+        self.nominal = jnp.asarray([1] + [t.nominal_steps for t in tpls], jnp.float32)
+        self.has_teleport = np.array([False] + [t.teleport is not None for t in tpls])
+        self.has_controller = np.array([False] + [t.controller is not None for t in tpls])
+        space = env.action_space(env_params)
+        self.action_shape = tuple(space.shape)
+        self.action_dtype = space.dtype
+
+    # ---- per-environment template evaluations (unbatched) ------------------
+    def _satisfied(self, state) -> jax.Array:
+        vals = [jnp.asarray(False)] + [t.satisfied(state, self.env_params) for t in self.templates]
+        return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
+
+    def _initiation(self, state) -> jax.Array:
+        vals = [jnp.asarray(True)] + [t.initiation(state, self.env_params) for t in self.templates]
+        return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
+
+    def _controller_actions(self, key, state) -> jax.Array:
+        zero = jnp.zeros(self.action_shape, self.action_dtype)
+        keys = jax.random.split(key, len(self.templates) + 1)
+        acts = [zero] + [
+            jnp.asarray(t.controller(k, state, self.env_params), self.action_dtype).reshape(self.action_shape)
+            if t.controller is not None else zero
+            for k, t in zip(keys[1:], self.templates)
+        ]
+        return jnp.stack(acts)
+
+    def callable_options(self, learned: jax.Array, learner: jax.Array) -> jax.Array:
+        """bool [num_options]: options that can run now (learned, the learner, or realisable)."""
+        ids = jnp.arange(self.h.num_options)
+        realise = jnp.asarray(self.has_controller)
+        if self.allow_teleport:
+            realise = realise | jnp.asarray(self.has_teleport)
+        return learned | realise | (ids == learner)
+
+    def action_masks(self, init_ok: jax.Array, callable_: jax.Array) -> jax.Array:
+        """bool [num_options, A]: what each option may choose in this state."""
+        call_ok = (init_ok & callable_)[1:]
+        allowed = jnp.concatenate([jnp.ones((self.P,), bool), call_ok])
+        return self.child_mask & allowed[None, :]
+
+    # ---- resets -------------------------------------------------------------
+    def reset(self, key: jax.Array, controls: Controls, num_envs: int) -> EnvCarry:
+        keys = jax.random.split(key, num_envs)
+        obs, state = jax.vmap(self.env.reset_env, (0, None))(keys, self.env_params)
+        stack = jax.vmap(lambda _: stack_init(self.D, controls.start))(jnp.arange(num_envs))
+        zeros_b = jnp.zeros((num_envs,), bool)
+        return EnvCarry(state, obs, stack, zeros_b, jnp.zeros((num_envs,), jnp.float32))
+
+    # ---- the decision cascade (unbatched) -------------------------------------
+    def _decide(self, stack, frozen_choice, learner_choice, controls: Controls, callable_):
+        """Walk down from the stack top until a primitive step is fixed."""
+        decided = jnp.asarray(False)
+        learner_decided = jnp.asarray(False)
+        primitive = jnp.asarray(0, jnp.int32)
+        teleported = jnp.asarray(NO_OPTION, jnp.int32)
+        scripted = jnp.asarray(NO_OPTION, jnp.int32)
+        # A called template is pushed if it is learned, is the learner, or plays a scripted
+        # controller (when it is not teleported instead); otherwise it is teleported.
+        scripted_ok = self.has_controller & ~(self.has_teleport & self.allow_teleport)
+        pushable = (controls.learned | (jnp.arange(self.h.num_options) == controls.learner)
+                    | jnp.asarray(scripted_ok))
+        for _ in range(self.D):
+            top = jnp.maximum(stack_top(stack), 0)
+            is_learner = top == controls.learner
+            is_scripted = ~is_learner & ~controls.learned[top]
+            choice = jnp.where(is_learner, learner_choice, frozen_choice[top])
+            open_ = ~decided
+            run_script = open_ & is_scripted
+            chooses = open_ & ~is_scripted
+            learner_decided = learner_decided | (chooses & is_learner)
+            is_prim = choice < self.P
+            tpl = jnp.clip(choice - self.P + 1, 0, self.h.num_options - 1)
+            push = chooses & ~is_prim & pushable[tpl] & callable_[tpl]
+            teleport = chooses & ~is_prim & ~push
+            take_prim = chooses & is_prim
+            scripted = jnp.where(run_script, top, scripted)
+            primitive = jnp.where(take_prim, choice, primitive)
+            teleported = jnp.where(teleport, tpl, teleported)
+            decided = decided | run_script | take_prim | teleport
+            stack = stack_push(stack, tpl, push)
+        return stack, primitive, teleported, scripted, learner_decided
+
+    # ---- one tick for the whole batch ------------------------------------------
+    def tick(self, carry: EnvCarry, key: jax.Array, learner_state, bank_params,
+             controls: Controls) -> tuple[EnvCarry, Transition, EpisodeEnds]:
+        B = carry.obs.shape[0]
+        k_act, k_frozen, k_ctrl, k_tp, k_step, k_reset = jax.random.split(key, 6)
+        callable_ = self.callable_options(controls.learned, controls.learner)
+        init_ok = jax.vmap(self._initiation)(carry.env_state)                     # [B, O]
+        masks = jax.vmap(lambda i: self.action_masks(i, callable_))(init_ok)      # [B, O, A]
+        learner_idx = jnp.maximum(controls.learner, 0)
+        learner_mask = masks[:, learner_idx]                                      # [B, A]
+        act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
+        logits = jax.vmap(self.agent.policy_logits, (0, None))(bank_params, carry.obs)  # [O, B, A]
+        logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
+        if self.frozen_policy == "greedy":
+            frozen = jnp.argmax(logits, -1)
+        else:
+            frozen = jax.random.categorical(k_frozen, logits, -1)
+        frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)                     # [B, O]
+
+        stack, primitive, teleported, scripted, decided = jax.vmap(
+            lambda s, f, l: self._decide(s, f, l, controls, callable_)
+        )(carry.stack, frozen, act.action)
+
+        ctrl = jax.vmap(self._controller_actions)(jax.random.split(k_ctrl, B), carry.env_state)
+        prim_action = jnp.broadcast_to(
+            primitive.reshape((B,) + (1,) * len(self.action_shape)), (B,) + self.action_shape
+        ).astype(self.action_dtype)
+        scripted_action = jnp.take_along_axis(
+            ctrl, jnp.maximum(scripted, 0).reshape((B, 1) + (1,) * len(self.action_shape)), 1
+        )[:, 0]
+        is_scripted = (scripted >= 0).reshape((B,) + (1,) * len(self.action_shape))
+        action = jnp.where(is_scripted, scripted_action, prim_action)
+
+        state_in = carry.env_state
+        if self.allow_teleport and self.has_teleport.any():
+            state_in, action = self._apply_teleports(k_tp, state_in, action, teleported)
+
+        obs, state, reward, terminated, truncated, info = jax.vmap(
+            self.env.step_env, (0, 0, 0, None)
+        )(jax.random.split(k_step, B), state_in, action, self.env_params)
+
+        # pops: the lowest entry that is satisfied or out of ticks ends, with all above it
+        stack = jax.vmap(stack_tick)(stack)
+        sat = jax.vmap(self._satisfied)(state)                                   # [B, O]
+        opt = jnp.maximum(stack.option, 0)
+        live = jnp.arange(self.D)[None, :] < stack.depth[:, None]
+        ended = live & (jnp.take_along_axis(sat, opt, 1) | (stack.steps >= self.k_max[opt]))
+        first_end = jnp.where(ended.any(1), jnp.argmax(ended, 1), self.D)
+        learner_on = jax.vmap(stack_contains, (0, None))(stack, controls.learner)
+        learner_pos = jnp.argmax(stack.option == controls.learner, 1)
+        learner_ended = learner_on & (first_end <= learner_pos)
+        stack = jax.vmap(stack_truncate)(stack, first_end)
+
+        env_done = terminated | truncated
+        reset = env_done | (first_end == 0)
+        if self.reset_on_learner_end:
+            reset = reset | learner_ended
+        is_root = controls.learner <= 0
+        learner_reward = jnp.where(
+            is_root, reward.astype(jnp.float32),
+            (learner_on & sat[:, learner_idx]).astype(jnp.float32),
+        )
+        tp_steps = jnp.where(teleported >= 0, self.nominal[jnp.maximum(teleported, 0)], 1.0)
+        discount = self.gamma ** tp_steps
+        # In evaluation (no learner) the whole episode counts, with the environment's reward.
+        started = carry.learner_started | decided | (controls.learner < 0)
+        ep_return = carry.learner_return + jnp.where(started, learner_reward, 0.0)
+        finished = reset & started
+
+        obs_re, state_re = jax.vmap(self.env.reset_env, (0, None))(
+            jax.random.split(k_reset, B), self.env_params)
+        fresh = jax.vmap(lambda _: stack_init(self.D, controls.start))(jnp.arange(B))
+        new_carry = EnvCarry(
+            env_state=jax.vmap(select_tree)(reset, state_re, state),
+            obs=jax.vmap(select_tree)(reset, obs_re, obs),
+            stack=jax.vmap(select_tree)(reset, fresh, stack),
+            learner_started=started & ~reset,
+            learner_return=jnp.where(reset, 0.0, ep_return),
+        )
+        transition = Transition(
+            obs=carry.obs, action=act.action, action_mask=learner_mask, log_prob=act.log_prob,
+            value=act.value, decision=decided, reward=jnp.where(started, learner_reward, 0.0),
+            discount=discount, done=reset,
+        )
+        # Success of a finished episode: the template's F_o (its return) for a template
+        # learner; for the root, the environment's info["success"] where it reports one
+        # (e.g. Fetch's fraction of blocks placed), else the episode return.
+        if "success" in info:
+            root_success = jnp.asarray(info["success"], jnp.float32)
+            success = jnp.where(is_root, root_success, ep_return)
+        else:
+            success = ep_return
+        ends = EpisodeEnds(
+            reset=reset, finished=finished, ret=jnp.where(finished, ep_return, 0.0),
+            success=jnp.where(finished, success, 0.0), decided=decided,
+        )
+        return new_carry, transition, ends
+
+    def _apply_teleports(self, key, state, action, teleported):
+        B = teleported.shape[0]
+        keys = jax.random.split(key, len(self.templates))
+        for j, (tpl, k) in enumerate(zip(self.templates, keys), start=1):
+            if tpl.teleport is None:
+                continue
+            jumped, tp_action = jax.vmap(tpl.teleport, (0, 0, None))(
+                jax.random.split(k, B), state, self.env_params)
+            hit = teleported == j
+            state = jax.vmap(select_tree)(hit, jumped, state)
+            tp_action = jnp.asarray(tp_action, self.action_dtype).reshape(action.shape)
+            action = jnp.where(hit.reshape((B,) + (1,) * (action.ndim - 1)), tp_action, action)
+        return state, action

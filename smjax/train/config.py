@@ -1,0 +1,114 @@
+"""Typed training configuration, validated before anything compiles."""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+METHODS = ("top-down", "bottom-up", "flat")
+ALGOS = ("ppo", "dqn", "actor-critic")
+FROZEN_POLICIES = ("auto", "greedy", "sample")
+
+
+class ConfigError(ValueError):
+    """An invalid configuration value; the message names the field and the allowed range."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Every knob of a training run. ``agent`` holds the learner's own hyper-parameters.
+
+    Attributes:
+      method: top-down (the paper's Algorithms 1-2), bottom-up (option-value iteration
+        order: sub-skills first from reset states), or flat (one learner, no hierarchy).
+      algo: learner for every level: ppo, dqn or actor-critic (the paper's).
+      hierarchy: name from ``env.hierarchies()``; None picks the environment's default
+        ("paper" where it exists). Ignored by ``flat`` (which uses "flat").
+      num_envs: parallel environments per seed.
+      rollout_ticks: ticks per rollout (one learner update per rollout).
+      updates_per_chunk: rollouts per compiled chunk (the host checks progress between chunks).
+      threshold: a level ends when its running success reaches this (the paper: 0.8).
+      success_window: number of recent learner episodes the running success averages.
+      max_episodes_per_level: the level's budget L (environment episodes).
+      gamma: discount per primitive tick (gamma**d for a teleported call of duration d).
+      frozen_policy: how trained options act when frozen (auto: greedy for dqn, else sample).
+      eval_envs: episodes run (one per environment) to measure final_success.
+      eval_max_ticks: cap on an evaluation episode's length.
+      checkpoint_every: seconds between checkpoints (0 disables periodic checkpoints).
+    """
+
+    method: str = "top-down"
+    algo: str = "ppo"
+    hierarchy: str | None = None
+    num_envs: int = 128
+    rollout_ticks: int = 32
+    updates_per_chunk: int = 4
+    threshold: float = 0.8
+    success_window: int = 256
+    max_episodes_per_level: int = 40_000
+    gamma: float = 0.99
+    frozen_policy: str = "auto"
+    eval_envs: int = 256
+    eval_max_ticks: int = 2000
+    checkpoint_every: float = 60.0
+    agent: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.validate()
+
+    def validate(self) -> None:
+        def need(ok: bool, name: str, allowed: str) -> None:
+            if not ok:
+                raise ConfigError(f"config field {name!r} = {getattr(self, name)!r}: must be {allowed}")
+
+        need(self.method in METHODS, "method", f"one of {METHODS}")
+        need(self.algo in ALGOS, "algo", f"one of {ALGOS}")
+        need(self.hierarchy is None or isinstance(self.hierarchy, str), "hierarchy", "a name or None")
+        for name in ("num_envs", "rollout_ticks", "updates_per_chunk", "success_window",
+                     "max_episodes_per_level", "eval_envs", "eval_max_ticks"):
+            value = getattr(self, name)
+            need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, name,
+                 "an integer >= 1")
+        need(isinstance(self.threshold, (int, float)) and 0 < self.threshold <= 1, "threshold",
+             "in (0, 1]")
+        need(isinstance(self.gamma, (int, float)) and 0 < self.gamma <= 1, "gamma", "in (0, 1]")
+        need(self.frozen_policy in FROZEN_POLICIES, "frozen_policy", f"one of {FROZEN_POLICIES}")
+        need(isinstance(self.checkpoint_every, (int, float)) and self.checkpoint_every >= 0,
+             "checkpoint_every", ">= 0 seconds")
+        need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
+
+    def replace(self, **changes: Any) -> "TrainConfig":
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "TrainConfig":
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ConfigError(f"unknown config field(s) {unknown}; valid fields: {sorted(names)}")
+        return cls(**data)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> "TrainConfig":
+        path = Path(path)
+        text = path.read_text()
+        if path.suffix in (".yaml", ".yml"):
+            import yaml
+
+            data = yaml.safe_load(text)
+        else:
+            data = json.loads(text)
+        if not isinstance(data, dict):
+            raise ConfigError(f"config file {path} must hold a mapping of fields, got {type(data).__name__}")
+        return cls.from_dict(data)
+
+
+def config_differences(a: dict, b: dict) -> list[str]:
+    """Field names whose values differ between two config dicts (for resume checks)."""
+    keys = sorted(set(a) | set(b))
+    return [k for k in keys if a.get(k) != b.get(k)]

@@ -1,0 +1,115 @@
+"""The compiled core shared by every method: level chunks, the policy bank, evaluation.
+
+One compiled ``chunk`` serves every level of every method: the option being trained,
+the option each episode starts from and the set of learned options are traced
+arrays, and every learner has the same padded action head (all primitives + all
+templates, masked per option). Seeds are a leading ``vmap`` axis.
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from smjax.core.env import select_tree
+from smjax.options.hierarchy import Hierarchy
+from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
+from smjax.train.config import TrainConfig
+
+
+class SeedState(NamedTuple):
+    carry: EnvCarry
+    learner: Any
+    key: jax.Array
+
+
+def frozen_mode(cfg: TrainConfig) -> str:
+    if cfg.frozen_policy != "auto":
+        return cfg.frozen_policy
+    return "greedy" if cfg.algo == "dqn" else "sample"
+
+
+class Engine:
+    """Builds the jitted, seed-vmapped functions for one (env, hierarchy, agent, config)."""
+
+    def __init__(self, env, env_params, hierarchy: Hierarchy, agent, cfg: TrainConfig):
+        self.env, self.env_params, self.h, self.agent, self.cfg = env, env_params, hierarchy, agent, cfg
+        mode = frozen_mode(cfg)
+        self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
+                                      frozen_policy=mode, allow_teleport=True)
+        # Evaluation: the final product alone, no teleports (leaf controllers still run).
+        self.eval_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
+                                           frozen_policy=mode, allow_teleport=False)
+        obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
+        self.example_obs = obs
+        self.num_actions = hierarchy.num_actions
+        self.chunk = jax.jit(jax.vmap(self._chunk, in_axes=(0, 0, 0, 0, None, None)),
+                             donate_argnums=(0,))
+        self.evaluate = jax.jit(jax.vmap(self._evaluate, in_axes=(0, 0, 0)))
+        self.init_learner = jax.jit(jax.vmap(
+            lambda k: agent.init(k, self.example_obs, self.num_actions)))
+        self.reset = jax.jit(jax.vmap(self._reset, in_axes=(0, None)))
+
+    # ---- state -----------------------------------------------------------------
+    def _reset(self, key: jax.Array, start: jax.Array) -> EnvCarry:
+        controls = Controls(jnp.asarray(NO_OPTION), start, jnp.zeros((self.h.num_options,), bool))
+        return self.runner.reset(key, controls, self.cfg.num_envs)
+
+    def new_bank(self, learner_states) -> Any:
+        """Policy bank per seed: [S, num_options, ...] copies of the learners' initial params."""
+        n = self.h.num_options
+        return jax.tree.map(lambda p: jnp.repeat(p[:, None], n, axis=1), learner_states.params)
+
+    @staticmethod
+    def store_in_bank(bank, params, option: int):
+        return jax.tree.map(lambda b, p: b.at[:, option].set(p), bank, params)
+
+    # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
+    def _chunk(self, state: SeedState, active, bank, learned, learner, start):
+        controls = Controls(learner, start, learned)
+        runner, agent, cfg = self.runner, self.agent, self.cfg
+
+        def update_step(st: SeedState, _):
+            key, k_roll, k_upd = jax.random.split(st.key, 3)
+
+            def tick_fn(c, k):
+                c, tr, ends = runner.tick(c, k, st.learner, bank, controls)
+                return c, (tr, TickStats.of(ends))
+
+            carry, (traj, stats) = jax.lax.scan(
+                tick_fn, st.carry, jax.random.split(k_roll, cfg.rollout_ticks))
+            learner_state, metrics = agent.update(st.learner, traj, carry.obs, k_upd)
+            stats = jax.tree.map(lambda x: x.sum(0), stats)
+            return SeedState(carry, learner_state, key), (stats, metrics)
+
+        new, (stats, metrics) = jax.lax.scan(update_step, state, None, cfg.updates_per_chunk)
+        new = select_tree(active, new, state)
+        stats = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), stats)
+        return new, stats, metrics
+
+    # ---- evaluation of the trained hierarchy, no teleports -------------------------
+    def _evaluate(self, key, bank, learned):
+        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned)
+        E = self.cfg.eval_envs
+        k_reset, k_init, key = jax.random.split(key, 3)
+        carry = self.eval_runner.reset(k_reset, controls, E)
+        dummy = self.agent.init(k_init, self.example_obs, self.num_actions)
+
+        def cond(c):
+            _, _, done, _, _, t = c
+            return jnp.logical_and(~done.all(), t < self.cfg.eval_max_ticks)
+
+        def body(c):
+            carry, key, done, ret, success, t = c
+            key, k = jax.random.split(key)
+            carry, tr, ends = self.eval_runner.tick(carry, k, dummy, bank, controls)
+            first = ends.reset & ~done
+            ret = jnp.where(first, ends.ret, ret)
+            success = jnp.where(first, ends.success, success)
+            return carry, key, done | ends.reset, ret, success, t + 1
+
+        zeros = jnp.zeros((E,), jnp.float32)
+        init = (carry, key, jnp.zeros((E,), bool), zeros, zeros, jnp.asarray(0))
+        _, _, done, ret, success, _ = jax.lax.while_loop(cond, body, init)
+        return {"return": ret.mean(), "success": success.mean(), "completed": done.mean()}

@@ -1,0 +1,94 @@
+"""results.json, curves.csv and curves.png exactly as DESIGN.md section 6 specifies."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import jax
+
+import smjax
+
+CURVE_COLUMNS = ("seed", "level", "template", "episodes", "env_steps", "avg_return")
+
+
+def _clean(x: Any) -> Any:
+    """JSON-safe: NaN -> None, numpy scalars -> Python."""
+    if isinstance(x, float):
+        return None if math.isnan(x) or math.isinf(x) else x
+    if hasattr(x, "item") and getattr(x, "ndim", 1) == 0:
+        return _clean(x.item())
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    return x
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write via a temporary file and rename, so a crash never leaves half a file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
+def build_results(env_name: str, method: str, algo: str, seeds: list[int], threshold: float,
+                  raw: dict, config: dict) -> dict:
+    env, task = env_name.split("/", 1)
+    levels = raw["levels"]
+    per_seed_eps, per_seed_steps = [], []
+    for s in range(len(seeds)):
+        ok = all(rec.reached[s] for rec in levels)
+        per_seed_eps.append(sum(rec.episodes[s] for rec in levels) if ok else None)
+        per_seed_steps.append(sum(rec.env_steps[s] for rec in levels) if ok else None)
+    final = raw["final"]
+    return _clean({
+        "env": env,
+        "task": task,
+        "method": method,
+        "algo": algo,
+        "seeds": list(seeds),
+        "threshold": threshold,
+        "episodes_to_threshold": per_seed_eps,
+        "env_steps_to_threshold": per_seed_steps,
+        "final_success": [float(x) for x in final["success"]],
+        "final_return": [float(x) for x in final["return"]],
+        "levels": [
+            {"template": r.template, "level": r.level, "episodes": r.episodes,
+             "env_steps": r.env_steps, "reached": r.reached,
+             "final_running_success": r.final_running_success}
+            for r in levels
+        ],
+        "wall_seconds": raw["wall_seconds"],
+        "compile_seconds": raw["compile_seconds"],
+        "device": jax.devices()[0].platform,
+        "jax_version": jax.__version__,
+        "smjax_version": smjax.__version__,
+        "config": config,
+    })
+
+
+def write_results(out_dir: str | Path, results: dict, curves: list[tuple]) -> None:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "results.json", json.dumps(results, indent=2) + "\n")
+    rows = [",".join(CURVE_COLUMNS)]
+    for row in curves:
+        seed, level, template, eps, steps, ret = row
+        ret_s = "" if ret is None or (isinstance(ret, float) and math.isnan(ret)) else f"{ret:.6g}"
+        rows.append(f"{seed},{level},{template},{eps},{steps},{ret_s}")
+    atomic_write_text(out / "curves.csv", "\n".join(rows) + "\n")
+    from smjax.viz.plots import plot_curves
+
+    plot_curves([out], out / "curves.png")
+
+
+def read_curves(path: str | Path) -> list[dict]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))

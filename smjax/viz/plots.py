@@ -1,0 +1,69 @@
+"""Learning-curve plots in the paper's style: average reward vs episodes, one panel per level."""
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+
+def _load(run_dir: Path):
+    from smjax.train.results import read_curves
+
+    rows = read_curves(run_dir / "curves.csv")
+    meta = json.loads((run_dir / "results.json").read_text()) if (run_dir / "results.json").exists() else {}
+    return rows, meta
+
+
+def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
+    """Overlay runs (e.g. top-down vs flat): one panel per level, mean +- std over seeds.
+
+    Episodes on the x axis are cumulative over the levels trained before, as the paper
+    counts them, so a run's panels read left to right as one budget.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = [(Path(d), *_load(Path(d))) for d in run_dirs]
+    levels = sorted({(int(r["level"]), r["template"]) for _, rows, _ in runs for r in rows})
+    n = max(1, len(levels))
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.4), squeeze=False)
+    for d, rows, meta in runs:
+        label = f"{meta.get('method', d.name)} ({meta.get('algo', '?')})"
+        by_level = defaultdict(lambda: defaultdict(list))
+        for r in rows:
+            if r["avg_return"] == "":
+                continue
+            by_level[(int(r["level"]), r["template"])][int(r["seed"])].append(
+                (int(r["episodes"]), float(r["avg_return"])))
+        for ax, key in zip(axes[0], levels):
+            seeds = by_level.get(key)
+            if not seeds:
+                continue
+            grid_max = max(pts[-1][0] for pts in seeds.values())
+            grid = np.linspace(0, grid_max, 100)
+            ys = []
+            for pts in seeds.values():
+                x, y = np.array(pts).T
+                ys.append(np.interp(grid, x, y, left=np.nan, right=y[-1]))
+            ys = np.array(ys)
+            mean, std = np.nanmean(ys, 0), np.nanstd(ys, 0)
+            line, = ax.plot(grid, mean, label=label)
+            ax.fill_between(grid, mean - std, mean + std, alpha=0.2, color=line.get_color())
+    for ax, (level, template) in zip(axes[0], levels):
+        ax.set_title(f"level {level}: {template}")
+        ax.set_xlabel("episodes")
+        ax.set_ylabel("average reward")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_path, dpi=110)
+    plt.close(fig)
+    return out_path
