@@ -1,0 +1,140 @@
+"""``CraftEnv``: the Craft gridworld (Andreas et al. 2017, as used by Sticky Mittens) in JAX.
+
+Actions: Discrete(5) = DOWN 0 (y-1), UP 1 (y+1), LEFT 2 (x-1), RIGHT 3 (x+1), USE 4.
+``step_env`` also accepts NOOP = 5 (not in the action space) so that an impossible teleport
+is a do-nothing step. Rules in ``dynamics``, world generation in ``worldgen``,
+observations in ``observation``, templates and hierarchies in ``templates``.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from smjax.core import spaces
+from smjax.core.env import Environment
+from smjax.core.registry import register
+from smjax.envs.craft import constants as C
+from smjax.envs.craft import dynamics, observation, templates, worldgen
+from smjax.envs.craft.render import render_state
+from smjax.envs.craft.structs import (
+    OBSERVATIONS, CraftConfig, CraftParams, CraftState, make_params,
+)
+
+
+class CraftEnv(Environment[CraftState, CraftParams]):
+    """One Craft task; ``config`` is static (task, observation kind)."""
+
+    def __init__(self, config: CraftConfig | None = None):
+        self.config = config if config is not None else CraftConfig()
+        self.name = f"craft/{self.config.task}"
+        self._obs_fn = observation.OBSERVATION_FNS[self.config.observation]
+        self._templates = None
+        self._hierarchies = None
+
+    @property
+    def default_params(self) -> CraftParams:
+        return make_params(self.config.task)
+
+    def new_state(self, key: jax.Array) -> CraftState:
+        """A freshly generated world (ignores any fixed map)."""
+        grid, pos = worldgen.generate(key, self.config.world)
+        return CraftState(
+            grid=grid,
+            pos=pos,
+            direction=jnp.int32(C.DOWN),
+            inventory=jnp.zeros(C.NUM_KINDS, jnp.int32),
+            step=jnp.int32(0),
+        )
+
+    def reset_env(self, key: jax.Array, params: CraftParams) -> tuple[jax.Array, CraftState]:
+        fresh = self.new_state(key)
+        fixed = CraftState(
+            grid=params.fixed_grid,
+            pos=params.fixed_pos,
+            direction=params.fixed_direction,
+            inventory=jnp.zeros(C.NUM_KINDS, jnp.int32),
+            step=jnp.int32(0),
+        )
+        state = jax.tree.map(lambda a, b: jnp.where(params.use_fixed_map, a, b), fixed, fresh)
+        return self.get_obs(state, params), state
+
+    def step_env(self, key: jax.Array, state: CraftState, action: jax.Array, params: CraftParams):
+        next_state = dynamics.transition(state, action)
+        reward, terminated, truncated = dynamics.reward_and_done(next_state, params)
+        return self.get_obs(next_state, params), next_state, reward, terminated, truncated, {}
+
+    def get_obs(self, state: CraftState, params: CraftParams | None = None) -> jax.Array:
+        return self._obs_fn(state)
+
+    def action_space(self, params: CraftParams | None = None) -> spaces.Discrete:
+        return spaces.Discrete(C.NUM_ACTIONS)
+
+    def observation_space(self, params: CraftParams | None = None) -> spaces.Box:
+        return observation.observation_space(self.config.observation)
+
+    @property
+    def primitive_action_names(self) -> tuple[str, ...]:
+        return C.ACTION_NAMES
+
+    def render(self, state: CraftState, params: CraftParams | None = None):
+        return render_state(state.grid, state.pos, state.direction, state.inventory)
+
+    def templates(self) -> dict:
+        if self._templates is None:
+            self._templates = templates.make_templates()
+        return dict(self._templates)
+
+    def hierarchies(self) -> dict:
+        """name -> Hierarchy; the default ("paper" where defined, else "recipe") first."""
+        if self._hierarchies is None:
+            self._hierarchies = templates.make_hierarchies(self, self.config.task)
+        return dict(self._hierarchies)
+
+
+def make_craft(
+    task: str,
+    *,
+    observation: str = "paper",
+    fixed_map: bool = False,
+    max_steps: int | None = None,
+    map_seed: int = 0,
+) -> tuple[CraftEnv, CraftParams]:
+    """Build ``(env, params)`` for a Craft task, validating every override value."""
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+    if not isinstance(fixed_map, bool):
+        raise ValueError(f"fixed_map must be True or False, got {fixed_map!r}")
+    if max_steps is not None and (
+        isinstance(max_steps, bool) or not isinstance(max_steps, int) or not 1 <= max_steps < 2**31
+    ):
+        raise ValueError(f"max_steps must be None or an int in [1, 2**31), got {max_steps!r}")
+    if isinstance(map_seed, bool) or not isinstance(map_seed, int) or not 0 <= map_seed < 2**32:
+        raise ValueError(f"map_seed must be an int in [0, 2**32), got {map_seed!r}")
+    env = CraftEnv(CraftConfig(task=task, observation=observation))
+    fixed_state = env.new_state(jax.random.PRNGKey(map_seed)) if fixed_map else None
+    return env, make_params(task, max_steps=max_steps, fixed_state=fixed_state)
+
+
+def _factory(task: str):
+    def factory(
+        *,
+        observation: str = "paper",
+        fixed_map: bool = False,
+        max_steps: int | None = None,
+        map_seed: int = 0,
+    ) -> tuple[CraftEnv, CraftParams]:
+        return make_craft(task, observation=observation, fixed_map=fixed_map,
+                          max_steps=max_steps, map_seed=map_seed)
+
+    factory.__doc__ = f"craft/{task}: overrides observation, fixed_map, max_steps, map_seed."
+    return factory
+
+
+def register_all() -> None:
+    for task, goal in C.TASKS.items():
+        verb = "get" if goal in C.PRIMITIVES else "make"
+        register(
+            f"craft/{task}",
+            _factory(task),
+            f"Craft: {verb} {goal} ({C.world_kind(task)} world, cap {C.STEP_CAP[goal]} steps)",
+        )

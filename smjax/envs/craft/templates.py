@@ -1,0 +1,144 @@
+"""Craft's option templates (``give_<item>``) and hierarchies (flat, recipe, paper).
+
+``give_X`` promises "X is held". Its teleport is the reference's: among the empty
+4-neighbours of every cell holding X (a crafted X: of its workshop) pick one (stand cell,
+facing) pair uniformly, stand there facing the target, for a crafted X add one X to the
+inventory first, and return USE for the caller to execute in the same tick (so the call is
+one environment step). With no such cell the state is returned unchanged with NOOP.
+A stand cell next to two targets is two pairs, as in the reference's list of candidates.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+
+from smjax.envs.craft import constants as C
+from smjax.envs.craft.structs import CraftParams, CraftState
+from smjax.options import Hierarchy, OptionTemplate, declare
+
+N = C.GRID_SIZE
+
+
+def stand_candidates(grid: jax.Array, target_kind: int) -> jax.Array:
+    """bool [4, 12, 12]: standing at (x, y) facing direction d looks at a ``target_kind`` cell."""
+    target = grid == target_kind
+    empty = grid == C.EMPTY
+    pad = jnp.pad(target, 1)  # pad[x + 1, y + 1] == target[x, y]
+    facing = []
+    for dx, dy in C.DIRECTION_DELTAS:
+        facing.append(jax.lax.slice(pad, (1 + dx, 1 + dy), (1 + dx + N, 1 + dy + N)))
+    return jnp.stack(facing) & empty[None]
+
+
+def _teleport_fn(item: str) -> Callable:
+    item_id = C.KIND_ID[item]
+    target_kind = C.WORKSHOP_OF.get(item, item_id)
+    crafted = item in C.CRAFTED
+
+    def teleport(key: jax.Array, state: CraftState, params: CraftParams):
+        cand = stand_candidates(state.grid, target_kind).reshape(-1)
+        count = jnp.sum(cand, dtype=jnp.int32)
+        pick = jnp.minimum(
+            (jax.random.uniform(key) * count.astype(jnp.float32)).astype(jnp.int32),
+            jnp.maximum(count - 1, 0),
+        )
+        index = jnp.argmax(jnp.cumsum(cand, dtype=jnp.int32) > pick)
+        direction, cell = index // (N * N), index % (N * N)
+        possible = count > 0
+        inventory = state.inventory
+        if crafted:
+            inventory = inventory.at[item_id].add(possible.astype(inventory.dtype))
+        jumped = state.replace(
+            pos=jnp.where(possible, jnp.stack([cell // N, cell % N]), state.pos).astype(jnp.int32),
+            direction=jnp.where(possible, direction, state.direction).astype(jnp.int32),
+            inventory=inventory,
+        )
+        action = jnp.where(possible, C.USE, C.NOOP).astype(jnp.int32)
+        return jumped, action
+
+    return teleport
+
+
+def _held_fn(item_id: int, held: bool) -> Callable:
+    def fn(state: CraftState, params: CraftParams) -> jax.Array:
+        return (state.inventory[item_id] > 0) == held
+    return fn
+
+
+def make_templates() -> dict[str, OptionTemplate]:
+    """``give_<item>`` for the 6 primitives and 18 crafted items."""
+    out = {}
+    for item in C.ITEMS:
+        item_id = C.KIND_ID[item]
+        name = f"give_{item}"
+        how = f"at workshop{C.WORKSHOPS.index(C.WORKSHOP_OF[item])}" if item in C.CRAFTED else ""
+        out[name] = OptionTemplate(
+            name=name,
+            satisfied=_held_fn(item_id, True),
+            initiation=_held_fn(item_id, False),
+            k_max=C.STEP_CAP[item],
+            teleport=_teleport_fn(item),
+            nominal_steps=C.NOMINAL_STEPS[item],
+            description=f"obtain one {item} {how}".strip(),
+        )
+    return out
+
+
+def recipe_children(task: str) -> dict[str, list[str]]:
+    """task -> give_<direct ingredient> + primitives, recursively (a treasure's tool counts)."""
+    goal = C.TASKS[task]
+    children: dict[str, list[str]] = {}
+
+    def add(option: str, item: str) -> None:
+        kids = [f"give_{i}" for i in C.ingredients(item)]
+        children[option] = kids + ["primitives"]
+        for i in C.ingredients(item):
+            if f"give_{i}" not in children:
+                add(f"give_{i}", i)
+
+    add(task, goal)
+    return children
+
+
+PAPER_CHILDREN = {
+    "get_gem": {
+        "get_gem": ["give_axe", "primitives"],
+        "give_axe": ["give_stick", "give_iron", "primitives"],
+        "give_stick": ["give_wood", "primitives"],
+        "give_iron": ["primitives"],
+        "give_wood": ["primitives"],
+    },
+    "get_gold": {
+        "get_gold": ["give_bridge", "primitives"],
+        "give_bridge": ["give_wood", "give_iron", "primitives"],
+        "give_wood": ["primitives"],
+        "give_iron": ["primitives"],
+    },
+}
+
+
+def hierarchy_names(task: str) -> tuple[str, ...]:
+    """Hierarchy names offered for a task, the default first."""
+    C.check_task(task)
+    return (("paper",) if task in PAPER_CHILDREN else ()) + ("recipe", "flat")
+
+
+def default_hierarchy_name(task: str) -> str:
+    """"paper" where the paper defines one (get_gem, get_gold), else "recipe"."""
+    return hierarchy_names(task)[0]
+
+
+def make_hierarchies(env, task: str) -> dict[str, Hierarchy]:
+    """name -> Hierarchy for ``task``, in ``hierarchy_names`` order (default first)."""
+    out = {}
+    for name in hierarchy_names(task):
+        if name == "paper":
+            children = PAPER_CHILDREN[task]
+        elif name == "recipe":
+            children = recipe_children(task)
+        else:
+            children = {task: ["primitives"]}
+        out[name] = declare(env, task, children)
+    return out

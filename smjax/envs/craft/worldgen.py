@@ -1,0 +1,139 @@
+"""World generation, exactly the reference's order, at a cost that fits inside every step.
+
+Order (ENVIRONMENTS.md section 3): for island/cave tasks the treasure at (x0, 1) with x0
+uniform in 1..10, every empty cell of its 3 x 3 neighbourhood becomes water (gold) or stone
+(gem); then 4 each of iron, grass, wood, rock at uniform free cells, then workshops 0, 1, 2,
+then the agent at a free cell facing DOWN.
+
+Sequential uniform placement onto distinct free cells is the same distribution as the first
+20 entries of a uniform random permutation of the free cells, so we run 20 steps of a
+Fisher-Yates shuffle over a *virtual* list of the free cells (closed form, no 100-element
+array): swaps are remembered as (position, value) pairs and looked up by comparison.
+
+Why not ``jax.random``: the auto-resetting ``step`` builds a fresh world on every step (under
+``vmap`` both sides of the reset select run), so generation sits on the hot path. Its 21
+uniform numbers come from a counter-based integer hash (murmur3's finaliser) of the key's
+bits: a few integer ops each instead of threefry's ~100. Same key, same world.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from smjax.envs.craft import constants as C
+
+N = C.GRID_SIZE
+NUM_RESOURCES_EACH = 4
+RESOURCE_KINDS = tuple(C.KIND_ID[k] for k in ("iron", "grass", "wood", "rock"))
+# Kinds placed at free cells, in order; the agent is the 20th draw.
+PLACED_KINDS = np.array(
+    [k for k in RESOURCE_KINDS for _ in range(NUM_RESOURCES_EACH)] + list(C.WORKSHOPS),
+    np.uint8,
+)
+NUM_DRAWS = len(PLACED_KINDS) + 1
+
+
+def _boundary_grid() -> np.ndarray:
+    grid = np.zeros((N, N), np.uint8)
+    grid[0, :] = grid[-1, :] = grid[:, 0] = grid[:, -1] = C.BOUNDARY
+    return grid
+
+
+BASE_GRID = _boundary_grid()
+_GOLDEN = np.uint32(0x9E3779B9)
+
+
+def _fmix32(h: jax.Array) -> jax.Array:
+    h = h ^ (h >> 16)
+    h = h * np.uint32(0x85EBCA6B)
+    h = h ^ (h >> 13)
+    h = h * np.uint32(0xC2B2AE35)
+    return h ^ (h >> 16)
+
+
+def key_words(key: jax.Array) -> jax.Array:
+    """The uint32 words of a typed or raw (uint32) PRNG key."""
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        key = jax.random.key_data(key)
+    return jnp.asarray(key, jnp.uint32).reshape(-1)
+
+
+def hash_uniforms(key: jax.Array, n: int) -> jax.Array:
+    """``n`` float32 numbers in [0, 1) from a counter-based hash of the key."""
+    words = key_words(key)
+    seed = np.uint32(0x3C6EF372)
+    for i in range(words.shape[0]):
+        seed = _fmix32(seed ^ words[i]) + _GOLDEN
+    counters = jnp.arange(1, n + 1, dtype=jnp.uint32) * _GOLDEN
+    bits = _fmix32(_fmix32(seed + counters) ^ words[-1])
+    return (bits >> 8).astype(jnp.float32) * np.float32(2.0**-24)
+
+
+def _uniform_int(u: jax.Array, n: jax.Array) -> jax.Array:
+    """floor(u * n) for u in [0, 1), guarded against float rounding up to n."""
+    return jnp.minimum((u * n.astype(jnp.float32)).astype(jnp.int32), n - 1)
+
+
+def _free_cell(k: jax.Array, col_lo: jax.Array, width: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Cell (x, y) of entry k of the virtual free-cell list.
+
+    Entries 0..79 are rows 3..10 (never touched by the treasure's 3 x 3 neighbourhood);
+    the rest are rows 1..2 without the columns col_lo .. col_lo + width - 1 it covers.
+    """
+    upper = k < 80
+    per_row = 10 - width
+    k_low = jnp.maximum(k - 80, 0)
+    row = k_low // per_row
+    j = k_low - row * per_row
+    x_low = jnp.where(j < col_lo - 1, j + 1, j + 1 + width)
+    x = jnp.where(upper, 1 + k % 10, x_low)
+    y = jnp.where(upper, 3 + k // 10, 1 + row)
+    return x, y
+
+
+def generate(key: jax.Array, world: str) -> tuple[jax.Array, jax.Array]:
+    """A fresh map: (grid uint8 [12, 12], agent pos int32 [2]). ``world`` is static."""
+    if world not in ("plain", "island", "cave"):
+        raise ValueError(f"world must be 'plain', 'island' or 'cave', got {world!r}")
+    u = hash_uniforms(key, NUM_DRAWS + 1)
+    flat = jnp.asarray(BASE_GRID).reshape(-1)
+    if world == "plain":
+        col_lo, width = jnp.int32(1), jnp.int32(0)
+    else:
+        x0 = 1 + _uniform_int(u[NUM_DRAWS], jnp.int32(10))
+        col_lo = jnp.maximum(x0 - 1, 1)
+        width = jnp.minimum(x0 + 1, N - 2) - col_lo + 1
+        treasure = C.GOLD if world == "island" else C.GEM
+        border = C.WATER if world == "island" else C.STONE
+        # The 3 x 3 neighbourhood: row 0 and columns 0/11 are boundary and stay so.
+        dx = jnp.array([-1, 0, 1, -1, 0, 1], jnp.int32)
+        cy = jnp.array([1, 1, 1, 2, 2, 2], jnp.int32)
+        cx = x0 + dx
+        interior = (cx >= 1) & (cx <= N - 2)
+        kinds = jnp.where((dx == 0) & (cy == 1), treasure, border)
+        kinds = jnp.where(interior, kinds, C.BOUNDARY).astype(jnp.uint8)
+        flat = flat.at[cx * N + cy].set(kinds)
+    num_free = 100 - 2 * width
+    # Partial Fisher-Yates over the virtual list [0, num_free): draw t takes position
+    # j_t >= t; the value previously at position t moves to j_t.
+    moved_pos: list[jax.Array] = []
+    moved_val: list[jax.Array] = []
+
+    def value_at(p: jax.Array) -> jax.Array:
+        v = p
+        for mp, mv in zip(moved_pos, moved_val):
+            v = jnp.where(mp == p, mv, v)
+        return v
+
+    chosen = []
+    for t in range(NUM_DRAWS):
+        j = t + _uniform_int(u[t], num_free - t)
+        chosen.append(value_at(j))
+        moved_val.append(value_at(jnp.int32(t)))
+        moved_pos.append(j)
+    xs, ys = _free_cell(jnp.stack(chosen), col_lo, width)
+    cells = xs[:-1] * N + ys[:-1]
+    flat = flat.at[cells].set(jnp.asarray(PLACED_KINDS), unique_indices=True)
+    pos = jnp.stack([xs[-1], ys[-1]]).astype(jnp.int32)
+    return flat.reshape(N, N), pos
