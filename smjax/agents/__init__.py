@@ -35,7 +35,8 @@ def make_config(algo: str, **config_overrides: Any) -> Any:
 
 def make_agent(algo: str, **config_overrides: Any) -> Agent:
     """Build the learner ``algo`` (one of :data:`ALGOS`) with config fields overridden."""
-    return _MAKERS[algo](make_config(algo, **config_overrides))
+    config = make_config(algo, **config_overrides)  # validates algo before the lookup below
+    return _MAKERS[algo](config)
 
 
 __all__ = [
