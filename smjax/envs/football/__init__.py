@@ -1,0 +1,32 @@
+"""11 vs 11 football in pure JAX (Google Research Football's rules and coordinates).
+
+Registers ``football/11v11_easy``, ``football/11v11_medium`` and ``football/11v11_hard``
+(opponent difficulty 0.05 / 0.6 / 0.95). Overrides: ``observation`` ("simple115" or
+"paper"), ``game_length`` (3000), ``checkpoint_reward`` (False) and ``difficulty``
+(None = the task's level).
+"""
+from __future__ import annotations
+
+from smjax.core.registry import register
+from smjax.envs.football.builtin_ai import builtin_ai
+from smjax.envs.football.env import DIFFICULTIES, FootballEnv
+from smjax.envs.football.match import play_match
+from smjax.envs.football.state import FootballParams, FootballState, initial_state, mirror_state
+
+
+def _factory(level: str):
+    def make(*, observation: str = "simple115", game_length: int = 3000,
+             checkpoint_reward: bool = False, difficulty: float | None = None):
+        env = FootballEnv(observation=observation, game_length=game_length,
+                          difficulty=DIFFICULTIES[level] if difficulty is None else difficulty,
+                          checkpoint_reward=checkpoint_reward)
+        return env, env.default_params
+    return make
+
+
+for _level, _value in DIFFICULTIES.items():
+    register(f"football/11v11_{_level}", _factory(_level),
+             f"11 vs 11 football against the built-in AI at difficulty {_value} ({_level})")
+
+__all__ = ["FootballEnv", "FootballParams", "FootballState", "DIFFICULTIES", "builtin_ai",
+           "play_match", "initial_state", "mirror_state"]
