@@ -18,29 +18,30 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from smjax.envs.craft import constants as C
 from smjax.envs.craft.structs import CraftParams, CraftState
 
 N = C.GRID_SIZE
-_DELTAS = jnp.asarray(C.DIRECTION_DELTAS)
-_GRABBABLE = np.zeros(C.NUM_KINDS, bool)
-_GRABBABLE[list(C.PRIMITIVE_IDS)] = True
 
 
-def fire_recipes(inventory: jax.Array, workshop: jax.Array) -> jax.Array:
-    """Apply one USE at ``workshop`` (a kind id, or anything else for none) to an inventory."""
+def fire_recipes(counts: list[jax.Array], workshop: jax.Array) -> list[jax.Array]:
+    """Apply one USE at ``workshop`` (a kind id; anything else: none) to per-kind counts.
+
+    Works on a list of 31 scalars rather than the inventory vector: under vmap each
+    ``.at[i].add`` on a [B, 31] array is its own pass over memory, while scalar arithmetic
+    fuses into one loop.
+    """
+    counts = list(counts)
     for out, ins, at in C.RECIPE_IDS:
-        held = jnp.asarray(True)
+        fire = workshop == at
         for i in ins:
-            held = held & (inventory[i] > 0)
-        fire = (workshop == at) & held
-        delta = fire.astype(inventory.dtype)
+            fire = fire & (counts[i] > 0)
+        delta = fire.astype(counts[out].dtype)
         for i in ins:
-            inventory = inventory.at[i].add(-delta)
-        inventory = inventory.at[out].add(delta)
-    return inventory
+            counts[i] = counts[i] - delta
+        counts[out] = counts[out] + delta
+    return counts
 
 
 def transition(state: CraftState, action: jax.Array) -> CraftState:
@@ -49,33 +50,37 @@ def transition(state: CraftState, action: jax.Array) -> CraftState:
     is_move = (action >= 0) & (action < 4)
     is_use = action == C.USE
     direction = jnp.where(is_move, action, state.direction)
-    delta = _DELTAS[direction]
-    ahead = state.pos + delta  # the target of a move, or the faced cell of a USE
+    # Arithmetic instead of a table lookup (a gather under vmap); DOWN/UP/LEFT/RIGHT.
+    dx = jnp.where(direction == C.LEFT, -1, jnp.where(direction == C.RIGHT, 1, 0))
+    dy = jnp.where(direction == C.DOWN, -1, jnp.where(direction == C.UP, 1, 0))
+    ahead_x = state.pos[0] + dx  # target of a move / faced cell of a USE
+    ahead_y = state.pos[1] + dy
     flat = state.grid.reshape(-1)
-    ahead_idx = ahead[0] * N + ahead[1]
+    ahead_idx = ahead_x * N + ahead_y
     ahead_kind = flat[ahead_idx].astype(jnp.int32)
 
     moved = is_move & (ahead_kind == C.EMPTY)
-    pos = jnp.where(moved, ahead, state.pos)
+    pos = jnp.stack([jnp.where(moved, ahead_x, state.pos[0]),
+                     jnp.where(moved, ahead_y, state.pos[1])])
 
-    inv = state.inventory
-    grab = is_use & jnp.asarray(_GRABBABLE)[ahead_kind]
-    cross = is_use & (ahead_kind == C.WATER) & (inv[C.BRIDGE] > 0)
-    mine = is_use & (ahead_kind == C.STONE) & (inv[C.AXE] > 0)
-    workshop = jnp.where(is_use, ahead_kind, C.EMPTY)
-    inv = fire_recipes(inv, workshop)
-    inv = inv.at[ahead_kind].add(grab.astype(inv.dtype))
-    inv = inv.at[C.BRIDGE].add(-cross.astype(inv.dtype))
+    counts = [state.inventory[k] for k in range(C.NUM_KINDS)]
+    grab = is_use & (ahead_kind >= C.PRIMITIVE_IDS[0]) & (ahead_kind <= C.PRIMITIVE_IDS[-1])
+    cross = is_use & (ahead_kind == C.WATER) & (counts[C.BRIDGE] > 0)
+    mine = is_use & (ahead_kind == C.STONE) & (counts[C.AXE] > 0)
+    counts = fire_recipes(counts, jnp.where(is_use, ahead_kind, C.EMPTY))
+    for k in C.PRIMITIVE_IDS:
+        counts[k] = counts[k] + (grab & (ahead_kind == k)).astype(counts[k].dtype)
+    counts[C.BRIDGE] = counts[C.BRIDGE] - cross.astype(counts[C.BRIDGE].dtype)
     clear = grab | cross | mine
     # Compare-and-select over the 144 cells instead of a scatter: under vmap it fuses into
-    # one elementwise loop, where a batched scatter would be a slow per-row loop on CPU.
+    # one elementwise loop, where a batched scatter is a slow per-row loop on CPU.
     cell_ids = jnp.arange(N * N, dtype=jnp.int32)
     flat = jnp.where((cell_ids == ahead_idx) & clear, jnp.uint8(C.EMPTY), flat)
     return CraftState(
         grid=flat.reshape(N, N),
         pos=pos,
         direction=direction,
-        inventory=inv,
+        inventory=jnp.stack(counts),
         step=state.step + 1,
     )
 

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.core import spaces
-from smjax.core.env import Environment
+from smjax.core.env import Environment, select_tree
 from smjax.core.registry import register
 from smjax.envs.craft import constants as C
 from smjax.envs.craft import dynamics, observation, templates, worldgen
@@ -46,7 +46,8 @@ class CraftEnv(Environment[CraftState, CraftParams]):
             step=jnp.int32(0),
         )
 
-    def reset_env(self, key: jax.Array, params: CraftParams) -> tuple[jax.Array, CraftState]:
+    def initial_state(self, key: jax.Array, params: CraftParams) -> CraftState:
+        """The state ``reset_env`` starts from (a fresh world, or the fixed map)."""
         fresh = self.new_state(key)
         fixed = CraftState(
             grid=params.fixed_grid,
@@ -55,8 +56,31 @@ class CraftEnv(Environment[CraftState, CraftParams]):
             inventory=jnp.zeros(C.NUM_KINDS, jnp.int32),
             step=jnp.int32(0),
         )
-        state = jax.tree.map(lambda a, b: jnp.where(params.use_fixed_map, a, b), fixed, fresh)
+        return select_tree(params.use_fixed_map, fixed, fresh)
+
+    def reset_env(self, key: jax.Array, params: CraftParams) -> tuple[jax.Array, CraftState]:
+        state = self.initial_state(key, params)
         return self.get_obs(state, params), state
+
+    def step(self, key: jax.Array, state: CraftState, action: jax.Array,
+             params: CraftParams | None = None):
+        """Auto-resetting step, same contract as ``Environment.step``.
+
+        Selects the next *state* first and observes it once; the pre-reset observation is
+        computed separately for ``info["final_observation"]``, so a caller that ignores it
+        lets XLA drop that second (expensive) observation.
+        """
+        if params is None:
+            params = self.default_params
+        key_step, key_reset = jax.random.split(key)
+        _, state_st, reward, terminated, truncated, info = self.step_env(
+            key_step, state, action, params
+        )
+        done = jnp.logical_or(terminated, truncated)
+        next_state = select_tree(done, self.initial_state(key_reset, params), state_st)
+        info = dict(info)
+        info["final_observation"] = self.get_obs(state_st, params)
+        return self.get_obs(next_state, params), next_state, reward, terminated, truncated, info
 
     def step_env(self, key: jax.Array, state: CraftState, action: jax.Array, params: CraftParams):
         next_state = dynamics.transition(state, action)

@@ -75,6 +75,13 @@ def _uniform_int(u: jax.Array, n: jax.Array) -> jax.Array:
     return jnp.minimum((u * n.astype(jnp.float32)).astype(jnp.int32), n - 1)
 
 
+def _div_small(a: jax.Array, b: jax.Array) -> jax.Array:
+    """a // b for 0 <= a < 2**20, 1 <= b: a float divide (vectorises; integer division on
+    CPU does not and was the most expensive op of world generation)."""
+    q = ((a.astype(jnp.float32) + 0.5) / b.astype(jnp.float32)).astype(jnp.int32)
+    return q
+
+
 def _free_cell(k: jax.Array, col_lo: jax.Array, width: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Cell (x, y) of entry k of the virtual free-cell list.
 
@@ -84,11 +91,12 @@ def _free_cell(k: jax.Array, col_lo: jax.Array, width: jax.Array) -> tuple[jax.A
     upper = k < 80
     per_row = 10 - width
     k_low = jnp.maximum(k - 80, 0)
-    row = k_low // per_row
+    row = _div_small(k_low, per_row)
     j = k_low - row * per_row
     x_low = jnp.where(j < col_lo - 1, j + 1, j + 1 + width)
-    x = jnp.where(upper, 1 + k % 10, x_low)
-    y = jnp.where(upper, 3 + k // 10, 1 + row)
+    k_up = _div_small(k, jnp.int32(10))
+    x = jnp.where(upper, 1 + k - 10 * k_up, x_low)
+    y = jnp.where(upper, 3 + k_up, 1 + row)
     return x, y
 
 
