@@ -106,6 +106,7 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
 
     def update(state: PolicyGradientState, traj: Transition, last_obs: jax.Array, key: jax.Array):
         del key  # the update is deterministic given the rollout
+        traj, last_obs = jax.tree.map(jnp.asarray, (traj, last_obs))  # numpy inputs too
         num_ticks, num_envs = traj.reward.shape[:2]
         decision = traj.decision.astype(bool)
         if config.bootstrap_at_rollout_end:

@@ -218,6 +218,7 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
         return new_state, metrics
 
     def update(state: DQNState, traj: Transition, last_obs: jax.Array, key: jax.Array):
+        traj, last_obs = jax.tree.map(jnp.asarray, (traj, last_obs))  # numpy inputs too
         num_ticks, num_envs = traj.reward.shape[:2]
         num_items = num_ticks * num_envs
         decision = traj.decision.astype(bool)

@@ -176,6 +176,7 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         return total, aux
 
     def update(state: PolicyGradientState, traj: Transition, last_obs: jax.Array, key: jax.Array):
+        traj, last_obs = jax.tree.map(jnp.asarray, (traj, last_obs))  # numpy inputs too
         num_ticks, num_envs = traj.reward.shape[:2]
         num_items = num_ticks * num_envs
         decision = traj.decision.astype(bool)

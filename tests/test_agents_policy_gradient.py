@@ -1,0 +1,133 @@
+"""PPO and the paper's actor-critic: losses over decisions only, learning, determinism."""
+from __future__ import annotations
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from envs_for_tests import EPISODE_TICKS, Corridor, make_option_driver_train, option_observation
+from smjax.agents import make_agent
+from smjax.agents.actor_critic import ActorCriticConfig, exploration_epsilon
+from smjax.agents.flat_train import FlatTrainConfig, make_train
+from test_agents_dqn import random_traj
+
+NUM_ACTIONS = 4
+OBS_DIM = 3
+
+
+def _init(agent, seed=0):
+    return agent.init(jax.random.PRNGKey(seed), jnp.zeros((OBS_DIM,), jnp.uint8), NUM_ACTIONS)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "actor-critic"])
+def test_non_decision_ticks_do_not_influence_the_update(algo):
+    """Changing what happens on non-decision ticks before an episode's first decision
+    (or the action/obs recorded there) must not change the update at all."""
+    agent = make_agent(algo)
+    traj, last_obs = random_traj(4, num_ticks=10, num_envs=3)
+    # env 0: episode ends at tick 3; ticks 4, 5 precede the next first decision at 6
+    decision = traj.decision.copy()
+    done = traj.done.copy()
+    decision[:, 0] = [1, 0, 1, 1, 0, 0, 1, 0, 1, 0]
+    done[:, 0] = [0, 0, 0, 1, 0, 0, 0, 0, 0, 0]
+    reward = traj.reward.copy()
+    reward[4:6, 0] = 0.0  # by contract: reward 0 before the learner's first decision
+    traj = traj._replace(decision=decision, done=done, reward=reward)
+    obs = traj.obs.copy()
+    action = traj.action.copy()
+    obs[4:6, 0] = 7
+    action[4:6, 0] = (action[4:6, 0] + 1) % NUM_ACTIONS
+    perturbed = traj._replace(obs=obs, action=action)
+    state = _init(agent)
+    key = jax.random.PRNGKey(3)
+    update = jax.jit(agent.update)
+    s1, m1 = update(state, traj, last_obs, key)
+    s2, m2 = update(state, perturbed, last_obs, key)
+    chex.assert_trees_all_close(s1.params, s2.params, rtol=1e-6, atol=1e-7)
+    chex.assert_trees_all_close(m1, m2, rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "actor-critic"])
+def test_update_counters_and_metrics(algo):
+    agent = make_agent(algo)
+    traj, last_obs = random_traj(8, num_ticks=9, num_envs=2)
+    state, metrics = jax.jit(agent.update)(_init(agent), traj, last_obs, jax.random.PRNGKey(0))
+    assert int(state.decisions_seen) == int(traj.decision.sum())
+    assert int(state.updates) == 1 and int(state.grad_steps) >= 1
+    for name, value in metrics.items():
+        chex.assert_shape(value, ())
+    chex.assert_tree_all_finite(metrics)
+    assert {"policy_loss", "value_loss", "entropy", "total_loss"} <= set(metrics)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "actor-critic"])
+def test_rollout_without_decisions_leaves_params_untouched(algo):
+    agent = make_agent(algo)
+    traj, last_obs = random_traj(2)
+    traj = traj._replace(decision=np.zeros_like(traj.decision))
+    state = _init(agent)
+    new_state, metrics = agent.update(state, traj, last_obs, jax.random.PRNGKey(0))
+    chex.assert_trees_all_equal(new_state.params, state.params)
+    chex.assert_tree_all_finite(metrics)
+
+
+def test_actor_critic_epsilon_follows_episodes_seen():
+    config = ActorCriticConfig()
+    np.testing.assert_allclose(exploration_epsilon(config, jnp.array(0)), 1.0)
+    np.testing.assert_allclose(exploration_epsilon(config, jnp.array(200)), np.exp(-1.0), rtol=1e-6)
+    agent = make_agent("actor-critic")
+    traj, last_obs = random_traj(9, num_ticks=10, num_envs=3)
+    state, metrics = agent.update(_init(agent), traj, last_obs, jax.random.PRNGKey(0))
+    assert int(state.episodes_seen) > 0
+    np.testing.assert_allclose(metrics["epsilon"], np.exp(-5e-3 * int(state.episodes_seen)), rtol=1e-6)
+
+
+CORRIDOR = Corridor(6)
+FLAT = FlatTrainConfig(num_envs=8, num_steps=32, num_updates=40)
+LEARNERS = {"ppo": {}, "actor-critic": {"epsilon_decay": 0.05}}
+
+
+@pytest.mark.parametrize("algo", list(LEARNERS))
+def test_learns_corridor(algo):
+    train = jax.jit(make_train(FLAT, CORRIDOR, CORRIDOR.default_params,
+                               make_agent(algo, **LEARNERS[algo])))
+    _, metrics = train(jax.random.PRNGKey(0))
+    returns = np.asarray(metrics["mean_episode_return"])
+    assert np.nanmean(returns[:3]) < 0.3       # random walk rarely reaches the end in 12 steps
+    assert np.nanmean(returns[-5:]) > np.nanmean(returns[:3]) + 0.2
+    if algo == "ppo":
+        assert np.nanmean(returns[-5:]) > 0.9
+        np.testing.assert_allclose(np.asarray(metrics["mean_episode_length"])[-5:], 5.0, atol=0.5)
+
+
+@pytest.mark.parametrize("algo", list(LEARNERS))
+def test_prefers_the_option_with_the_best_smdp_value(algo):
+    agent = make_agent(algo)
+    train = jax.jit(make_option_driver_train(agent, 8, 32, 60))
+    state, metrics = train(jax.random.PRNGKey(0))
+    assert int(metrics["masked_violations"].sum()) == 0
+    logits = agent.policy_logits(state.params, option_observation(jnp.arange(EPISODE_TICKS - 2)))
+    assert np.all(np.argmax(logits, -1) == 0)
+    chosen = np.asarray(metrics["chose_option0"])
+    assert chosen[-5:].mean() > chosen[:5].mean() + 0.1
+
+
+def test_training_is_deterministic_and_vmapped_seeds_match_single_runs():
+    config = FlatTrainConfig(num_envs=4, num_steps=16, num_updates=4)
+    train = make_train(config, CORRIDOR, CORRIDOR.default_params, make_agent("ppo"))
+    keys = jax.random.split(jax.random.PRNGKey(42), 2)
+    batched_state, batched_metrics = jax.jit(jax.vmap(train))(keys)
+    single = jax.jit(train)
+    for i in range(2):
+        state, metrics = single(keys[i])
+        again, _ = single(keys[i])
+        chex.assert_trees_all_equal(state.params, again.params)
+        chex.assert_trees_all_close(
+            jax.tree.map(lambda x: x[i], batched_state.params), state.params, rtol=1e-4, atol=1e-5)
+        np.testing.assert_allclose(batched_metrics["mean_episode_return"][i],
+                                   metrics["mean_episode_return"], rtol=1e-5)
+    chex.assert_shape(batched_metrics["total_loss"], (2, 4))
+    assert not np.allclose(jax.tree.leaves(batched_state.params)[0][0],
+                           jax.tree.leaves(batched_state.params)[0][1])
