@@ -1,0 +1,155 @@
+"""Scripted controllers for the stacking templates: smooth proportional control.
+
+Every controller is a pure function of (state, params, block index) returning
+float32[4] in [-1, 1]; the block index is a Python int (one controller per template).
+
+Gains: the movement command is ``clip(GAIN * error, -1, 1)``; with 0.05 m per unit of
+action a gain of 15 closes 75 % of the error per step, far from the error and at full
+speed (5 cm/step), near it smoothly (no integer truncation, unlike the reference's
+bang-bang commands). ``DEAD_BAND`` (0.02 m) decides when an axis counts as reached,
+which switches phases (xy before z); inside a phase every axis keeps being corrected
+proportionally so small errors do not persist.
+
+Templates are pure functions of (key, state, params), so a controller cannot count
+steps. Its phase is derived from the state instead:
+
+* *closing*: the block is between the fingertips (``||block - grip|| < REACH_TOL``)
+  and the fingers are still wider than the block (mean opening > ``FINGERS_AT_BLOCK``):
+  hold still and close. This replaces the reference's "close for 5 steps": the finger
+  servos (kp 30000) close on the block within one or two steps, and the opening says
+  when they have.
+* *holding*: the block is between the fingertips and the fingers are closed on it.
+* *opening*: release keeps the arm still until the fingers are open
+  (mean opening > ``FINGERS_OPEN``), replacing "open for 5 steps".
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from smjax.envs.fetch import state as st
+from smjax.envs.fetch.model import BLOCK_HALF, FINGER_RANGE
+from smjax.envs.fetch.state import FetchParams, FetchState
+
+GAIN = 15.0
+DEAD_BAND = 0.02
+#: Termination tests of ENVIRONMENTS.md: reached, placed (by pick), released.
+REACH_TOL = 0.03
+PLACE_TOL = 0.03
+RELEASE_HEIGHT = 0.05
+#: Carry height above the goal and the height release lifts to (at least).
+CARRY_HEIGHT = 0.1
+LIFT_Z = 0.65
+#: Finger opening thresholds (each finger 0 .. 0.05; the block's half width is 0.025).
+#: A gap this wide (just under the block's width, which the soft contact lets the fingers
+#: sink a few mm into, up to a little over it) means the fingers are stopped by a block.
+GRIP_GAP = (2 * BLOCK_HALF - 0.012, 2 * BLOCK_HALF + 0.006)
+#: A held block may sit this far from the grip point (it can slide a little in the fingers).
+HOLD_TOL = 0.05
+#: Finger speed (m/s) below which a closing grasp counts as finished.
+SETTLED_SPEED = 0.02
+FINGERS_OPEN = FINGER_RANGE[1] - 0.008
+OPEN, CLOSE = 1.0, -1.0
+
+
+def _command(error: jax.Array, fingers: float | jax.Array) -> jax.Array:
+    move = jnp.clip(GAIN * error, -1.0, 1.0)
+    return jnp.concatenate([move, jnp.reshape(jnp.asarray(fingers, jnp.float32), (1,))])
+
+
+def _lift_z(state: FetchState) -> jax.Array:
+    # High enough that the gripper ends more than 0.08 m from every goal, towers of 4+ included.
+    return jnp.maximum(LIFT_Z, jnp.max(state.goals[:, 2]) + CARRY_HEIGHT)
+
+
+def block_to_grip(state: FetchState, i: int) -> jax.Array:
+    return jnp.linalg.norm(st.block_pos(state)[i] - st.gripper_pos(state))
+
+
+def block_to_goal(state: FetchState, i: int) -> jax.Array:
+    return jnp.linalg.norm(st.block_pos(state)[i] - state.goals[i])
+
+
+def finger_gap(state: FetchState) -> jax.Array:
+    """Distance between the fingertips' inner faces (0 .. 0.1)."""
+    return jnp.sum(st.finger_qpos(state))
+
+
+def fingers_settled(state: FetchState) -> jax.Array:
+    return jnp.max(jnp.abs(st.finger_qvel(state))) < SETTLED_SPEED
+
+
+def is_reached(state: FetchState, i: int) -> jax.Array:
+    return block_to_grip(state, i) < REACH_TOL
+
+
+def is_gripping(state: FetchState, i: int) -> jax.Array:
+    """Block i held: fingers commanded shut, stopped by a block-wide gap, block at the grip."""
+    gap = finger_gap(state)
+    block_wide = (gap > GRIP_GAP[0]) & (gap < GRIP_GAP[1])
+    commanded_shut = jnp.max(state.data.ctrl) < 0.01
+    return block_wide & commanded_shut & (block_to_grip(state, i) < HOLD_TOL)
+
+
+def reach(state: FetchState, params: FetchParams, i: int) -> jax.Array:
+    """Open the fingers, move over block i (never descending while xy is off), then down."""
+    grip = st.gripper_pos(state)
+    block = st.block_pos(state)[i]
+    err = block - grip
+    xy_off = jnp.linalg.norm(err[:2]) > DEAD_BAND
+    # While xy is off, hold (or regain) a height where the fingertips clear the block tops.
+    hover_z = jnp.maximum(grip[2], block[2] + 2 * BLOCK_HALF)
+    z_err = jnp.where(xy_off, hover_z - grip[2], err[2])
+    return _command(jnp.stack([err[0], err[1], z_err]), OPEN)
+
+
+def carry(state: FetchState, params: FetchParams, i: int) -> jax.Array:
+    """With block i held: lift to goal + carry height, move over the goal, lower onto it.
+
+    The errors are measured on the block (not the grip point), so a block that slipped
+    in the fingers is still put where it belongs.
+    """
+    block = st.block_pos(state)[i]
+    goal = state.goals[i]
+    err = goal - block
+    xy_off = jnp.linalg.norm(err[:2]) > DEAD_BAND
+    carry_z = goal[2] + CARRY_HEIGHT
+    low = block[2] < carry_z - DEAD_BAND
+    # Lift first (xy frozen) so the block clears the tower, then xy at height, then lower.
+    move_xy = jnp.where(xy_off & low, jnp.zeros(2), err[:2])
+    z_err = jnp.where(xy_off, carry_z - block[2], err[2])
+    return _command(jnp.concatenate([move_xy, z_err[None]]), CLOSE)
+
+
+def pick(state: FetchState, params: FetchParams, i: int) -> jax.Array:
+    """Close on block i, then carry it onto its goal; re-reach it if it is not in the fingers."""
+    gripping = is_gripping(state, i)
+    carrying = gripping & fingers_settled(state)
+    closing = (is_reached(state, i) | gripping) & ~carrying
+    hold_still = _command(jnp.zeros(3), CLOSE)
+    return jnp.where(carrying, carry(state, params, i),
+                     jnp.where(closing, hold_still, reach(state, params, i)))
+
+
+def release(state: FetchState, params: FetchParams, i: int) -> jax.Array:
+    """Open the fingers (arm still), then lift straight up to the lift height."""
+    grip = st.gripper_pos(state)
+    opened = finger_gap(state) > 2 * FINGERS_OPEN
+    lift = jnp.stack([0.0, 0.0, _lift_z(state) - grip[2]])
+    return jnp.where(opened, _command(lift, OPEN), _command(jnp.zeros(3), OPEN))
+
+
+def place(state: FetchState, params: FetchParams, i: int) -> jax.Array:
+    """Level 1: reach -> pick & carry -> release as one controller, phase read off the state.
+
+    Release once the block is on its goal (within ``PLACE_TOL``) or, no longer held,
+    within the success distance; otherwise pick (which reaches first when needed).
+    """
+    dist = block_to_goal(state, i)
+    held = is_gripping(state, i)
+    on_goal = (dist < PLACE_TOL) | ((dist < params.success_distance) & ~held)
+    return jnp.where(on_goal, release(state, params, i), pick(state, params, i))
+
+
+def noop(state: FetchState, params: FetchParams) -> jax.Array:
+    return jnp.zeros(4, jnp.float32)

@@ -1,0 +1,120 @@
+"""Option templates and hierarchies of Fetch & Stack.
+
+Level 1 (task ``stack``): ``place_i`` for every block i, plus ``noop``.
+Level 2 (task ``place_i``): ``reach_i``, ``pick_i``, ``release_i``, plus ``noop``.
+All templates are realised by the scripted controllers of ``controllers.py`` (the
+environment cannot teleport). Termination tests (ENVIRONMENTS.md section 4):
+
+=============  =====================================================  =====  ==========
+template       satisfied (F_o)                                        k_max  initiation
+=============  =====================================================  =====  ==========
+reach_i        ||block_i - grip|| < 0.03                               30    always
+pick_i         ||block_i - goal_i|| < 0.03                             50    block i reached or held
+release_i      grip z > goal_i z + 0.05                                30    block i within 0.04 of goal i
+place_i        block i within 0.04 of goal i, not held, grip more     80    block i not in place
+               than 0.08 from goal i ("released and clear")
+noop           never (runs exactly one tick: k_max 1)                  1     always
+=============  =====================================================  =====  ==========
+"""
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+
+from smjax.envs.fetch import controllers as ctl
+from smjax.envs.fetch import state as st
+from smjax.envs.fetch.observation import blocks_placed
+from smjax.options import OptionTemplate, always, declare
+
+K_MAX = {"place": 80, "reach": 30, "pick": 50, "release": 30, "noop": 1}
+NOMINAL_STEPS = {"place": 40, "reach": 10, "pick": 20, "release": 6, "noop": 1}
+
+
+# ---- termination and initiation tests (pure; i is a Python int) ----------------
+def reach_satisfied(state, params, i: int) -> jax.Array:
+    return ctl.is_reached(state, i)
+
+
+def pick_satisfied(state, params, i: int) -> jax.Array:
+    return ctl.block_to_goal(state, i) < ctl.PLACE_TOL
+
+
+def release_satisfied(state, params, i: int) -> jax.Array:
+    return st.gripper_pos(state)[2] > state.goals[i, 2] + ctl.RELEASE_HEIGHT
+
+
+def place_satisfied(state, params, i: int) -> jax.Array:
+    in_place = blocks_placed(state, params)[i]
+    clear = jnp.linalg.norm(st.gripper_pos(state) - state.goals[i]) > params.clear_distance
+    return in_place & ~ctl.is_gripping(state, i) & clear
+
+
+def pick_initiation(state, params, i: int) -> jax.Array:
+    return ctl.is_reached(state, i) | ctl.is_gripping(state, i)
+
+
+def release_initiation(state, params, i: int) -> jax.Array:
+    return blocks_placed(state, params)[i]
+
+
+def place_initiation(state, params, i: int) -> jax.Array:
+    return ~blocks_placed(state, params)[i]
+
+
+def never(state, params) -> jax.Array:
+    return jnp.asarray(False)
+
+
+def _controller(fn, i: int):
+    def controller(key: jax.Array, state, params) -> jax.Array:
+        return fn(state, params, i)
+
+    return controller
+
+
+def _noop_controller(key: jax.Array, state, params) -> jax.Array:
+    return ctl.noop(state, params)
+
+
+def make_templates(num_blocks: int) -> dict[str, OptionTemplate]:
+    """name -> OptionTemplate for every block, plus ``noop``."""
+    out: dict[str, OptionTemplate] = {}
+    spec = {
+        "place": (place_satisfied, place_initiation, ctl.place,
+                  "reach, pick and release block {i} onto its goal (level 1)"),
+        "reach": (reach_satisfied, None, ctl.reach, "open and move the grip point onto block {i}"),
+        "pick": (pick_satisfied, pick_initiation, ctl.pick,
+                 "close on block {i}, carry it above its goal and lower it"),
+        "release": (release_satisfied, release_initiation, ctl.release,
+                    "open the fingers and lift clear of block {i}"),
+    }
+    for i in range(num_blocks):
+        for kind, (sat, init, fn, desc) in spec.items():
+            name = f"{kind}_{i}"
+            out[name] = OptionTemplate(
+                name=name,
+                satisfied=partial(sat, i=i),
+                initiation=always if init is None else partial(init, i=i),
+                k_max=K_MAX[kind],
+                controller=_controller(fn, i),
+                nominal_steps=NOMINAL_STEPS[kind],
+                description=desc.format(i=i),
+            )
+    out["noop"] = OptionTemplate(
+        name="noop", satisfied=never, k_max=K_MAX["noop"], controller=_noop_controller,
+        nominal_steps=NOMINAL_STEPS["noop"], description="do nothing for one tick",
+    )
+    return out
+
+
+def make_hierarchies(env) -> dict:
+    """``paper``: stack -> place_i -> {reach_i, pick_i, release_i}; ``flat``: stack -> level 2."""
+    n = env.num_blocks
+    paper = {"stack": [f"place_{i}" for i in range(n)] + ["noop"]}
+    for i in range(n):
+        paper[f"place_{i}"] = [f"reach_{i}", f"pick_{i}", f"release_{i}", "noop"]
+    flat = {"stack": [f"{k}_{i}" for i in range(n) for k in ("reach", "pick", "release")]
+            + ["noop"]}
+    return {"paper": declare(env, "stack", paper), "flat": declare(env, "stack", flat)}
