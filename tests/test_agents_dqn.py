@@ -29,9 +29,10 @@ def random_traj(seed: int, num_ticks: int = 7, num_envs: int = 3) -> tuple[Trans
     mask[..., 0] |= ~mask.any(-1)
     traj = Transition(
         obs=rng.integers(0, 9, shape + (OBS_DIM,)).astype(np.uint8),
-        action=rng.integers(0, NUM_ACTIONS, shape).astype(np.int32),
+        action=np.argmax(mask * rng.random(mask.shape), -1).astype(np.int32),  # an allowed one
         action_mask=mask,
-        log_prob=np.zeros(shape, np.float32), value=np.zeros(shape, np.float32),
+        log_prob=(-1.0 - 0.3 * rng.random(shape)).astype(np.float32),
+        value=rng.normal(size=shape).astype(np.float32),
         decision=rng.random(shape) < 0.6,
         reward=rng.normal(size=shape).astype(np.float32),
         discount=rng.choice([0.9, 0.9, 0.9**7], size=shape).astype(np.float32),

@@ -39,7 +39,12 @@ def test_non_decision_ticks_do_not_influence_the_update(algo):
     action = traj.action.copy()
     obs[4:6, 0] = 7
     action[4:6, 0] = (action[4:6, 0] + 1) % NUM_ACTIONS
-    perturbed = traj._replace(obs=obs, action=action)
+    # fields of non-decision ticks are unspecified: even NaN and out-of-range must not matter
+    not_decided = ~decision
+    log_prob = np.where(not_decided, np.nan, traj.log_prob).astype(np.float32)
+    value = np.where(not_decided, np.nan, traj.value).astype(np.float32)
+    action = np.where(not_decided, -1, action).astype(np.int32)
+    perturbed = traj._replace(obs=obs, action=action, log_prob=log_prob, value=value)
     state = _init(agent)
     key = jax.random.PRNGKey(3)
     update = jax.jit(agent.update)

@@ -114,11 +114,12 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
                 state.params, flatten_obs(last_obs))
         else:
             last_value = jnp.zeros((num_envs,), jnp.float32)
-        _, returns = smdp_gae(traj.reward, traj.discount, traj.done, decision, traj.value,
+        _, returns = smdp_gae(traj.reward, traj.discount, traj.done, decision,
+                              jnp.where(decision, traj.value, 0.0),
                               last_value, 1.0)
         num_items = num_ticks * num_envs
         obs = flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1)
-        action = traj.action.reshape(num_items).astype(jnp.int32)
+        action = jnp.where(decision, traj.action, 0).reshape(num_items).astype(jnp.int32)
         mask = traj.action_mask.reshape(num_items, -1).astype(bool)
         weight = decision.reshape(num_items)
         (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(

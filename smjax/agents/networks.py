@@ -159,9 +159,14 @@ def epsilon_greedy_log_probs(scores: jax.Array, mask: jax.Array, epsilon: jax.Ar
 def masked_mean(values: jax.Array, weights: jax.Array) -> jax.Array:
     """Mean of ``values`` over entries with weight 1 (0 if there are none, never NaN)."""
     weights = weights.astype(jnp.float32)
-    return jnp.sum(values * weights) / jnp.maximum(jnp.sum(weights), 1.0)
+    # where, not a product: a NaN on a weight-0 entry (e.g. an unused field of a
+    # non-decision tick) must not poison the mean.
+    total = jnp.sum(jnp.where(weights > 0, values * weights, 0.0))
+    return total / jnp.maximum(jnp.sum(weights), 1.0)
 
 
 def take_action(per_action: jax.Array, action: jax.Array) -> jax.Array:
-    """``per_action[..., action]`` for a batch of int actions."""
-    return jnp.take_along_axis(per_action, action[..., None].astype(jnp.int32), axis=-1)[..., 0]
+    """``per_action[..., action]`` for a batch of int actions (indices clipped into range,
+    since ticks where the learner did not decide may carry any action value)."""
+    index = jnp.clip(action.astype(jnp.int32), 0, per_action.shape[-1] - 1)
+    return jnp.take_along_axis(per_action, index[..., None], axis=-1)[..., 0]

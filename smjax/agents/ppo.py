@@ -181,19 +181,23 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         num_items = num_ticks * num_envs
         decision = traj.decision.astype(bool)
         _, last_value = network_for(traj.action_mask.shape[-1]).apply(state.params, flatten_obs(last_obs))
-        adv, ret = smdp_gae(traj.reward, traj.discount, traj.done, decision, traj.value,
+        adv, ret = smdp_gae(traj.reward, traj.discount, traj.done, decision,
+                            jnp.where(decision, traj.value, 0.0),
                             last_value, config.gae_lambda)
         if config.normalize_advantages:
             mean = masked_mean(adv, decision)
             var = masked_mean(jnp.square(adv - mean), decision)
             adv = jnp.where(decision, (adv - mean) / (jnp.sqrt(var) + 1e-8), 0.0)
         flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
+        # Fields of non-decision ticks are unspecified (may be NaN): zero them so that no
+        # NaN can reach a gradient through the weight-0 entries.
+        unused_to_zero = lambda x: jnp.where(decision, x, 0)  # noqa: E731
         data = (
             flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1),
-            flat(traj.action).astype(jnp.int32),
+            flat(unused_to_zero(traj.action)).astype(jnp.int32),
             flat(traj.action_mask).astype(bool),
-            flat(traj.log_prob).astype(jnp.float32),
-            flat(traj.value).astype(jnp.float32),
+            flat(unused_to_zero(traj.log_prob)).astype(jnp.float32),
+            flat(unused_to_zero(traj.value)).astype(jnp.float32),
             flat(adv),
             flat(ret),
             flat(decision),
