@@ -50,6 +50,13 @@ def test_config_validation_names_the_field(config_cls, field, bad):
         config_cls(**{field: bad})
 
 
+@pytest.mark.parametrize("algo", ALGOS)
+@pytest.mark.parametrize("bad", [0, -2, 2.5, "three"])
+def test_init_rejects_bad_action_counts(algo, bad):
+    with pytest.raises(ValueError, match="num_actions"):
+        make_agent(algo).init(jax.random.PRNGKey(0), OBS, bad)
+
+
 def test_make_config_accepts_list_hidden_sizes():
     assert make_config("ppo", hidden_sizes=[32]).hidden_sizes == (32,)
 

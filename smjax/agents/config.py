@@ -77,3 +77,14 @@ def replace_checked(config: Any, **overrides: Any) -> Any:
     if "hidden_sizes" in overrides and isinstance(overrides["hidden_sizes"], list):
         overrides["hidden_sizes"] = tuple(overrides["hidden_sizes"])  # keep configs hashable
     return dataclasses.replace(config, **overrides)
+
+
+def check_num_actions(num_actions: Any) -> int:
+    """``init``'s action count: a Python int >= 1 (it fixes the network's output shape)."""
+    try:
+        count = int(num_actions)
+    except (TypeError, ValueError):
+        raise ValueError(f"num_actions must be an integer >= 1, got {num_actions!r}") from None
+    if count < 1 or count != num_actions:
+        raise ValueError(f"num_actions must be an integer >= 1, got {num_actions!r}")
+    return count

@@ -155,8 +155,9 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
         return network_for(num_actions).apply(params, flatten_obs(obs))
 
     def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> DQNState:
+        num_actions = checks.check_num_actions(num_actions)
         example_obs = jnp.asarray(example_obs)
-        params = network_for(int(num_actions)).init(key, flatten_obs(example_obs[None]))
+        params = network_for(num_actions).init(key, flatten_obs(example_obs[None]))
         cap = config.buffer_capacity
         obs_buf = jnp.zeros((cap,) + example_obs.shape, example_obs.dtype)
         buffer = ReplayBuffer(

@@ -87,7 +87,7 @@ def make_network(num_actions: int, hidden_sizes, activation: str, shared_torso: 
 
 def init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions):
     """Shared ``init`` of the actor-critic-network learners."""
-    network = network_for(int(num_actions))
+    network = network_for(checks.check_num_actions(num_actions))
     params = network.init(key, flatten_obs(jnp.asarray(example_obs)[None]))
     zero = jnp.zeros((), jnp.int32)
     return PolicyGradientState(params, optimizer.init(params), zero, zero, zero, zero)
