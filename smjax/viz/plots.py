@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from collections import defaultdict
 from pathlib import Path
 
@@ -50,7 +51,9 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
                 x, y = np.array(pts).T
                 ys.append(np.interp(grid, x, y, left=np.nan, right=y[-1]))
             ys = np.array(ys)
-            mean, std = np.nanmean(ys, 0), np.nanstd(ys, 0)
+            with warnings.catch_warnings():  # columns before any seed's first point are all-NaN
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mean, std = np.nanmean(ys, 0), np.nanstd(ys, 0)
             line, = ax.plot(grid, mean, label=label)
             ax.fill_between(grid, mean - std, mean + std, alpha=0.2, color=line.get_color())
     for ax, (level, template) in zip(axes[0], levels):

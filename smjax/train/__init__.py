@@ -1,0 +1,5 @@
+"""Training: top-down (the paper's method), bottom-up option-value iteration, flat."""
+from smjax.train.config import ALGOS, METHODS, ConfigError, TrainConfig
+from smjax.train.run import run
+
+__all__ = ["TrainConfig", "ConfigError", "METHODS", "ALGOS", "run"]

@@ -1,0 +1,130 @@
+"""The hierarchical tick: teleport vs learned vs scripted dispatch, pops, SMDP discounts,
+learner masks and rewards (with a scripted test double standing in for the learner)."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hier_env import KeyDoor
+from smjax.agents.base import ActOutput, Agent
+from smjax.options.runner import NO_OPTION, Controls, HierarchyRunner
+
+B = 6
+GAMMA = 0.9
+
+
+def fixed_agent(choice: int, num_actions: int) -> Agent:
+    """Learner double: always picks ``choice``; frozen policies prefer argmax of their params."""
+    def act(state, obs, mask, key):
+        a = jnp.full((obs.shape[0],), choice, jnp.int32)
+        return ActOutput(a, jnp.zeros(obs.shape[0]), jnp.zeros(obs.shape[0]))
+
+    return Agent("fixed", init=lambda k, o, n: None, act=act, update=None,
+                 policy_logits=lambda params, obs: jnp.broadcast_to(params, (obs.shape[0], num_actions)))
+
+
+def setup(hname, learner_choice, bank_logits, learned, learner=0, start=0):
+    env = KeyDoor()
+    params = env.default_params
+    h = env.hierarchies()[hname]
+    agent = fixed_agent(learner_choice, h.num_actions)
+    runner = HierarchyRunner(env, params, h, agent, gamma=GAMMA, frozen_policy="greedy")
+    controls = Controls(jnp.asarray(learner), jnp.asarray(start), jnp.asarray(learned))
+    carry = runner.reset(jax.random.PRNGKey(0), controls, B)
+    bank = jnp.asarray(bank_logits, jnp.float32)
+    tick = jax.jit(lambda c, k: runner.tick(c, k, None, bank, controls))
+    return env, h, runner, carry, tick
+
+
+def test_unlearned_template_is_teleported_in_one_tick():
+    # root learner calls give_key (action 3); give_key is not learned -> teleport
+    env, h, runner, carry, tick = setup("paper", 3, np.zeros((2, 4)), [False, False])
+    carry2, tr, ends = tick(carry, jax.random.PRNGKey(1))
+    assert bool(carry2.env_state.has_key.all() | ends.reset.any())
+    assert bool(tr.decision.all())
+    np.testing.assert_allclose(np.asarray(tr.discount), GAMMA ** 4, rtol=1e-6)  # nominal_steps = 4
+    assert (np.asarray(carry2.stack.depth) == 1).all()  # teleports are not pushed
+    np.testing.assert_array_equal(np.asarray(carry2.env_state.t), 1)  # exactly one env step
+
+
+def test_learned_template_is_pushed_and_runs_its_frozen_policy_until_k_max():
+    bank = np.zeros((2, 4))
+    bank[1, 0] = 5.0  # the learned give_key always walks left (never grabs the key)
+    env, h, runner, carry, tick = setup("paper", 3, bank, [False, True])
+    # put every agent right of its key so walking left never stands on it in time to USE
+    carry = carry.replace(env_state=carry.env_state.replace(pos=jnp.full((B,), 7)))
+    decisions = []
+    for t in range(14):
+        carry, tr, ends = tick(carry, jax.random.PRNGKey(t))
+        decisions.append(np.asarray(tr.decision))
+        if t == 0:
+            assert (np.asarray(carry.stack.depth) == 2).all()
+            assert (np.asarray(carry.stack.option[:, 1]) == h.option_index("give_key")).all()
+            np.testing.assert_allclose(np.asarray(tr.discount), GAMMA)
+    decisions = np.array(decisions)
+    assert decisions[0].all()
+    # while give_key runs (k_max = 12 ticks) the learner does not decide; then it decides again
+    assert not decisions[1:12].any()
+    assert decisions[12].all()
+    assert not np.asarray(carry.env_state.has_key).any()
+
+
+def test_scripted_controller_is_pushed_and_pops_when_satisfied():
+    h_scripted = KeyDoor().hierarchies()["scripted"]
+    reach = h_scripted.action_index("reach_door")
+    env, h, runner, carry, tick = setup("scripted", reach, np.zeros((3, 5)), [False, False, False])
+    carry = carry.replace(env_state=carry.env_state.replace(
+        pos=jnp.zeros((B,), jnp.int32), door_pos=jnp.full((B,), 6)))
+    for t in range(6):
+        carry, tr, _ = tick(carry, jax.random.PRNGKey(t))
+        assert (np.asarray(carry.env_state.pos) == t + 1).all()
+        expected_depth = 2 if t < 5 else 1  # pops on the tick the door is reached
+        assert (np.asarray(carry.stack.depth) == expected_depth).all()
+        assert bool(tr.decision.all()) == (t == 0)
+
+
+def test_template_learner_reward_is_satisfaction_and_its_end_resets():
+    bank = np.zeros((2, 4))
+    bank[0, 3] = 5.0  # the learned root calls give_key, which is the learner
+    env, h, runner, carry, tick = setup("paper", 2, bank, [True, False], learner=1)
+    carry = carry.replace(env_state=carry.env_state.replace(pos=carry.env_state.key_pos))
+    carry2, tr, ends = tick(carry, jax.random.PRNGKey(3))
+    assert bool(tr.decision.all())  # pushed and decided in the same tick
+    np.testing.assert_allclose(np.asarray(tr.reward), 1.0)
+    assert bool(tr.done.all()) and bool(ends.finished.all())
+    np.testing.assert_allclose(np.asarray(ends.success), 1.0)
+    assert (np.asarray(carry2.env_state.t) == 0).all()  # reset after the learner's episode
+
+
+def test_learner_masks_respect_children_and_initiation():
+    env, h, runner, carry, tick = setup("paper", 3, np.zeros((2, 4)), [False, False], learner=1)
+    bank = jnp.zeros((2, 4))
+    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, False]))
+    _, tr, _ = runner.tick(carry, jax.random.PRNGKey(0), None, bank, controls)
+    # give_key's own children are the primitives only
+    np.testing.assert_array_equal(np.asarray(tr.action_mask[0]), [True, True, True, False])
+    masks = jax.vmap(lambda s: runner.action_masks(runner._initiation(s),
+                                                   runner.callable_options(controls.learned, controls.learner)))(
+        carry.env_state.replace(has_key=jnp.ones(B, bool)))
+    assert not np.asarray(masks[:, 0, 3]).any()  # give_key can't be called while holding the key
+
+
+def test_evaluation_runner_never_teleports():
+    env = KeyDoor()
+    h = env.hierarchies()["paper"]
+    agent = fixed_agent(0, h.num_actions)
+    runner = HierarchyRunner(env, env.default_params, h, agent, gamma=GAMMA, allow_teleport=False)
+    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), jnp.asarray([True, False]))
+    carry = runner.reset(jax.random.PRNGKey(0), controls, B)
+    bank = jnp.zeros((2, 4)).at[0, 3].set(9.0)  # root would love to call give_key
+    carry2, tr, _ = runner.tick(carry, jax.random.PRNGKey(1), None, bank, controls)
+    # give_key is neither learned nor scripted, so it is masked out: nobody teleports
+    assert not np.asarray(carry2.env_state.has_key).any()
+    assert not np.asarray(tr.decision).any()
+
+
+def test_frozen_policy_mode_is_validated():
+    env = KeyDoor()
+    h = env.hierarchies()["paper"]
+    with pytest.raises(ValueError, match="frozen_policy"):
+        HierarchyRunner(env, env.default_params, h, fixed_agent(0, 4), gamma=0.9, frozen_policy="best")

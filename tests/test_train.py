@@ -1,0 +1,88 @@
+"""Short end-to-end training runs on the key-and-door environment (real learning, CPU)."""
+import json
+
+import numpy as np
+import pytest
+
+from hier_env import make_keydoor
+from smjax.train import ConfigError, TrainConfig
+from smjax.train.run import run
+from smjax.train.results import CURVE_COLUMNS
+
+SMALL = dict(num_envs=32, rollout_ticks=16, updates_per_chunk=4, max_episodes_per_level=4000,
+             success_window=64, eval_envs=64)
+
+
+@pytest.fixture(scope="module")
+def top_down_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("td")
+    res = run(make_keydoor(), TrainConfig(**SMALL), [0, 1], out, progress=False)
+    return res, out
+
+
+def test_two_level_top_down_learns_and_works_without_teleports(top_down_run):
+    res, _ = top_down_run
+    assert [lvl["template"] for lvl in res["levels"]] == ["open_door", "give_key"]
+    assert all(all(lvl["reached"]) for lvl in res["levels"])
+    # the final product executes its own learned give_key option: no teleports
+    assert min(res["final_success"]) > 0.3
+    assert all(e is not None and e > 0 for e in res["episodes_to_threshold"])
+
+
+def test_results_contract(top_down_run):
+    res, out = top_down_run
+    on_disk = json.loads((out / "results.json").read_text())
+    for key in ("env", "task", "method", "algo", "seeds", "threshold", "episodes_to_threshold",
+                "env_steps_to_threshold", "final_success", "levels", "wall_seconds",
+                "compile_seconds", "device", "jax_version", "smjax_version", "config"):
+        assert key in on_disk, key
+    assert on_disk["method"] == "top-down" and on_disk["seeds"] == [0, 1]
+    assert len(on_disk["episodes_to_threshold"]) == 2 and len(on_disk["final_success"]) == 2
+    for lvl in on_disk["levels"]:
+        assert set(lvl) >= {"template", "level", "episodes", "env_steps"}
+        assert len(lvl["episodes"]) == 2
+    header = (out / "curves.csv").read_text().splitlines()[0]
+    assert tuple(header.split(",")) == CURVE_COLUMNS
+    assert (out / "curves.png").stat().st_size > 5000
+    # episodes to threshold are the per-level episodes summed, as the paper counts
+    for s in range(2):
+        assert on_disk["episodes_to_threshold"][s] == sum(l["episodes"][s] for l in on_disk["levels"])
+
+
+def test_same_seed_same_numbers():
+    cfg = TrainConfig(**(SMALL | {"max_episodes_per_level": 300}))
+    a = run(make_keydoor(), cfg, [3], progress=False)
+    b = run(make_keydoor(), cfg, [3], progress=False)
+    assert a["levels"] == b["levels"]
+    assert a["final_success"] == b["final_success"]
+
+
+@pytest.mark.parametrize("method", ["bottom-up", "flat"])
+def test_baselines_run_through_the_same_engine(method):
+    cfg = TrainConfig(**(SMALL | {"method": method, "max_episodes_per_level": 400}))
+    res = run(make_keydoor(), cfg, [0], progress=False)
+    names = [lvl["template"] for lvl in res["levels"]]
+    assert names == {"bottom-up": ["give_key", "open_door"], "flat": ["open_door"]}[method]
+    assert np.isfinite(res["final_success"]).all()
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("num_envs", 0, "'num_envs' = 0: must be an integer >= 1"),
+    ("threshold", 1.5, r"'threshold' = 1.5: must be in \(0, 1\]"),
+    ("threshold", 0, "threshold"),
+    ("method", "sideways", "one of"),
+    ("algo", "sarsa", "one of"),
+    ("gamma", -0.1, "gamma"),
+])
+def test_invalid_config_rejected_before_compile(field, value, message):
+    with pytest.raises(ConfigError, match=message):
+        TrainConfig(**{field: value})
+
+
+def test_unknown_config_field_and_bad_seeds():
+    with pytest.raises(ConfigError, match="unknown config field"):
+        TrainConfig.from_dict({"num_env": 4})
+    with pytest.raises(ValueError, match="distinct"):
+        run(make_keydoor(), TrainConfig(**SMALL), [1, 1], progress=False)
+    with pytest.raises(ValueError, match="unknown hierarchy"):
+        run(make_keydoor(), TrainConfig(**(SMALL | {"hierarchy": "nope"})), [0], progress=False)
