@@ -30,18 +30,19 @@ def measure(task: str, obs: str, num_envs: int, steps: int, repeats: int = 3,
         obs0, state = jax.vmap(env.reset, in_axes=(0, None))(keys, params)
 
         def body(carry, _):
-            state, key, acc = carry
+            state, key, acc, _ = carry
             key, k_act, k_step = jax.random.split(key, 3)
             actions = jax.random.randint(k_act, (num_envs,), 0, 5)
             obs, state, reward, term, trunc, _ = vstep(
                 jax.random.split(k_step, num_envs), state, actions, params
             )
-            # Consume the observation so it cannot be optimised away.
-            acc = acc + reward.sum() + obs.reshape(num_envs, -1)[:, -1].sum()
-            return (state, key, acc), None
+            # The observation rides in the carry, so every step materialises all of it (as
+            # a rollout buffer or a network input would); the rewards are summed.
+            return (state, key, acc + reward.sum(), obs), None
 
-        (state, _, acc), _ = jax.lax.scan(body, (state, key, jnp.float32(0)), None, length=steps)
-        return acc
+        carry = (state, key, jnp.float32(0), obs0)
+        (state, _, acc, obs), _ = jax.lax.scan(body, carry, None, length=steps)
+        return acc + jnp.sum(obs, dtype=jnp.float32)
 
     fn = jax.jit(run)
     t0 = time.perf_counter()

@@ -16,11 +16,11 @@ indices        size   content
 1585           1      constant 1
 =============  =====  ===========================================================
 
-The agent's own cell is the window centre (index 2, 2) and reads empty. The pooled part is
-computed without one-hotting 625 cells: every cell becomes a 31-bit word ``1 << kind``;
-OR-ing words over x-runs of 5 and then y-runs of 5 (two small dynamic slices of a padded
-grid) gives one word per block, unpacked to 31 bits at the end (625 + 125 word ops and 775
-bit tests instead of 19,375 one-hot values).
+The agent's own cell is the window centre (index 2, 2) and reads empty. Nothing is
+one-hotted cell by cell: every cell becomes a 31-bit word ``1 << kind`` (empty: 0); the
+pooled blocks are ORs of words over x-runs of 5 and then y-runs of 5 (two small dynamic
+slices of a padded grid: 300 + 125 word ORs instead of 19,375 one-hot values); the 25 local
+and 25 block words are then unpacked to bits in one pass.
 
 ``"compact"`` (180 float32):
 
@@ -53,9 +53,6 @@ K = C.NUM_KINDS
 PAPER_SIZE = 25 * K * 2 + K + 4 + 1
 NUM_MAP_KINDS = 13  # kinds 0..12 can be on the grid
 COMPACT_SIZE = 9 * NUM_MAP_KINDS + 3 * 11 + len(C.ITEMS) + 4 + 2
-# kind 0 must never be hot: compare against an id no cell has.
-_ONEHOT_IDS = np.arange(K, dtype=np.uint8)
-_ONEHOT_IDS[0] = 255
 
 
 def _facing(direction: jax.Array) -> jax.Array:
@@ -65,23 +62,23 @@ def _facing(direction: jax.Array) -> jax.Array:
 def paper_obs(state: CraftState) -> jax.Array:
     """The reference's 1586 features as uint8 (layout in the module docstring)."""
     x, y = state.pos[0], state.pos[1]
-    grid = state.grid
-    # Local 5 x 5 window: pad 2 with empty (all-zero one-hot) and slice at the agent.
-    local = jax.lax.dynamic_slice(jnp.pad(grid, 2), (x, y), (5, 5))
-    local_onehot = local[:, :, None] == jnp.asarray(_ONEHOT_IDS)
-    # Pooled 25 x 25: per-cell kind bit-words, OR over x-runs then y-runs of 5.
-    words = jnp.left_shift(jnp.uint32(1), grid.astype(jnp.uint32)) & ~jnp.uint32(1)
+    # Every cell as a kind bit-word; empty (kind 0, the "invalid" slot) sets no bit.
+    words = jnp.left_shift(jnp.uint32(1), state.grid.astype(jnp.uint32)) & ~jnp.uint32(1)
+    # Local 5 x 5 window: the words themselves (outside the grid: padding, no bits).
+    local = jax.lax.dynamic_slice(jnp.pad(words, 2), (x, y), (5, 5))
+    # Pooled 25 x 25: OR over x-runs of 5, then over y-runs of 5.
     wx = jax.lax.dynamic_slice(jnp.pad(words, ((12, 12), (0, 0))), (x, 0), (25, N))
     wx = wx.reshape(5, 5, N)
     bx = wx[:, 0] | wx[:, 1] | wx[:, 2] | wx[:, 3] | wx[:, 4]  # [5, N]
     wy = jax.lax.dynamic_slice(jnp.pad(bx, ((0, 0), (12, 12))), (0, y), (5, 25))
     wy = wy.reshape(5, 5, 5)
     blocks = wy[..., 0] | wy[..., 1] | wy[..., 2] | wy[..., 3] | wy[..., 4]  # [5, 5]
-    pooled = (blocks[:, :, None] >> jnp.arange(K, dtype=jnp.uint32)) & jnp.uint32(1)
+    # One unpack of all 50 words to 50 x 31 bits: the first 1550 features in order.
+    all_words = jnp.concatenate([local.reshape(-1), blocks.reshape(-1)])
+    bits = (all_words[:, None] >> jnp.arange(K, dtype=jnp.uint32)) & jnp.uint32(1)
     inventory = jnp.clip(state.inventory, 0, 255).astype(jnp.uint8)
     return jnp.concatenate([
-        local_onehot.reshape(-1).astype(jnp.uint8),
-        pooled.reshape(-1).astype(jnp.uint8),
+        bits.reshape(-1).astype(jnp.uint8),
         inventory,
         _facing(state.direction).astype(jnp.uint8),
         jnp.ones(1, jnp.uint8),
