@@ -48,13 +48,26 @@ GRIP_GAP = (2 * BLOCK_HALF - 0.012, 2 * BLOCK_HALF + 0.006)
 HOLD_TOL = 0.05
 #: Finger speed (m/s) below which a closing grasp counts as finished.
 SETTLED_SPEED = 0.02
-FINGERS_OPEN = FINGER_RANGE[1] - 0.008
+#: Controllers open each finger only this far (gap 0.076: 1.3 cm of clearance per side)
+#: rather than fully (0.1), so opening next to a neighbouring block or the tower pushes
+#: it less; the reach descends only once xy is within ``REACH_XY_BAND``.
+OPEN_FINGER = 0.038
+REACH_XY_BAND = 0.01
 OPEN, CLOSE = 1.0, -1.0
+#: Carrying moves at most 3 cm per step: sharper accelerations make the block swivel in
+#: the fingers.
+CARRY_SPEED = 0.6
 
 
-def _command(error: jax.Array, fingers: float | jax.Array) -> jax.Array:
-    move = jnp.clip(GAIN * error, -1.0, 1.0)
+def _command(error: jax.Array, fingers: float | jax.Array, speed: float = 1.0) -> jax.Array:
+    move = jnp.clip(GAIN * error, -speed, speed)
     return jnp.concatenate([move, jnp.reshape(jnp.asarray(fingers, jnp.float32), (1,))])
+
+
+def _open_command(state: FetchState) -> jax.Array:
+    # The finger action moves the servo target by 0.05 m per unit: steer it to OPEN_FINGER.
+    target = jnp.mean(state.data.ctrl)
+    return jnp.clip((OPEN_FINGER - target) / FINGER_RANGE[1], -1.0, 1.0)
 
 
 def _lift_z(state: FetchState) -> jax.Array:
@@ -96,11 +109,11 @@ def reach(state: FetchState, params: FetchParams, i: int) -> jax.Array:
     grip = st.gripper_pos(state)
     block = st.block_pos(state)[i]
     err = block - grip
-    xy_off = jnp.linalg.norm(err[:2]) > DEAD_BAND
+    xy_off = jnp.linalg.norm(err[:2]) > REACH_XY_BAND
     # While xy is off, hold (or regain) a height where the fingertips clear the block tops.
     hover_z = jnp.maximum(grip[2], block[2] + 2 * BLOCK_HALF)
     z_err = jnp.where(xy_off, hover_z - grip[2], err[2])
-    return _command(jnp.stack([err[0], err[1], z_err]), OPEN)
+    return _command(jnp.stack([err[0], err[1], z_err]), _open_command(state))
 
 
 def carry(state: FetchState, params: FetchParams, i: int) -> jax.Array:
@@ -118,7 +131,7 @@ def carry(state: FetchState, params: FetchParams, i: int) -> jax.Array:
     # Lift first (xy frozen) so the block clears the tower, then xy at height, then lower.
     move_xy = jnp.where(xy_off & low, jnp.zeros(2), err[:2])
     z_err = jnp.where(xy_off, carry_z - block[2], err[2])
-    return _command(jnp.concatenate([move_xy, z_err[None]]), CLOSE)
+    return _command(jnp.concatenate([move_xy, z_err[None]]), CLOSE, CARRY_SPEED)
 
 
 def pick(state: FetchState, params: FetchParams, i: int) -> jax.Array:
@@ -134,8 +147,9 @@ def pick(state: FetchState, params: FetchParams, i: int) -> jax.Array:
 def release(state: FetchState, params: FetchParams, i: int) -> jax.Array:
     """Open the fingers (arm still), then lift straight up to the lift height."""
     grip = st.gripper_pos(state)
-    opened = finger_gap(state) > 2 * FINGERS_OPEN
+    opened = finger_gap(state) > 2 * (FINGER_RANGE[1] - 0.006)
     lift = jnp.stack([0.0, 0.0, _lift_z(state) - grip[2]])
+    # Open fully here: a block that swivelled in the grip is wider than the reach opening.
     return jnp.where(opened, _command(lift, OPEN), _command(jnp.zeros(3), OPEN))
 
 
