@@ -117,3 +117,15 @@ def test_prefers_the_option_with_the_best_smdp_value(algo):
     assert np.all(np.argmax(logits, -1) == 0)
     chosen = np.asarray(metrics["chose_option0"])
     assert chosen[-5:].mean() > chosen[:5].mean() + 0.1
+
+
+def test_minibatches_partition_ticks_and_share_decisions_evenly():
+    from smjax.agents.ppo import minibatch_indices
+    decision = jnp.asarray(np.random.default_rng(0).random(37) < 0.2)
+    idx, real = minibatch_indices(jax.random.PRNGKey(0), decision, 4)
+    chex.assert_shape(idx, (4, 10))
+    covered = np.sort(np.asarray(idx)[np.asarray(real)])
+    np.testing.assert_array_equal(covered, np.arange(37))  # every tick exactly once
+    per_minibatch = np.asarray(decision)[np.asarray(idx)].__and__(np.asarray(real)).sum(1)
+    assert per_minibatch.sum() == int(decision.sum())
+    assert per_minibatch.max() - per_minibatch.min() <= 1

@@ -3,9 +3,11 @@
 The rollout ``Transition[T, B]`` holds every tick; only ticks with ``decision`` train:
 every loss term is a mean over decision ticks (non-decision ticks weigh 0), advantages
 come from :func:`smjax.agents.smdp.smdp_gae` and are normalised over decisions only.
-Minibatches are drawn from the T*B ticks (so a minibatch may hold few decisions when the
-learner decides rarely; the masked mean keeps each minibatch's loss a proper average,
-and a minibatch without any decision leaves the parameters and optimiser untouched).
+Minibatches partition the T*B ticks with the decisions dealt evenly among them (every
+minibatch gets the same number of decisions, +-1, however rarely the learner decides);
+the masked mean keeps each minibatch's loss a proper average, and a minibatch without
+any decision leaves the parameters and optimiser untouched. The compute is that of all
+T*B ticks (static shapes), so very sparse decisions cost as much as dense ones.
 
 ``gamma`` is not read by the update: the per-tick discounts arrive in
 ``Transition.discount``. It is part of the config so that the trainer building those
@@ -116,14 +118,21 @@ def logits_of(network_for, params, obs) -> jax.Array:
     return logits
 
 
-def minibatch_indices(key: jax.Array, num_items: int, num_minibatches: int):
-    """Shuffled indices ``[M, S]`` covering all items, plus a weight of 0 for padding."""
+def minibatch_indices(key: jax.Array, decision: jax.Array, num_minibatches: int):
+    """Shuffled indices ``[M, S]`` over all items, decisions dealt evenly to minibatches.
+
+    Decisions are put first in random order, then item p goes to minibatch p % M, so
+    every minibatch holds the same number of decisions (+-1) however sparse they are.
+    Returns the indices and a flag that is False on padding entries.
+    """
+    num_items = decision.shape[0]
     size = -(-num_items // num_minibatches)
     pad = num_minibatches * size - num_items
-    perm = jax.random.permutation(key, num_items)
-    idx = jnp.concatenate([perm, jnp.zeros((pad,), perm.dtype)])
+    noise = jax.random.uniform(key, (num_items,))
+    order = jnp.argsort(jnp.where(decision, noise, noise + 2.0))
+    idx = jnp.concatenate([order, jnp.zeros((pad,), order.dtype)])
     real = jnp.concatenate([jnp.ones((num_items,), bool), jnp.zeros((pad,), bool)])
-    return idx.reshape(num_minibatches, size), real.reshape(num_minibatches, size)
+    return idx.reshape(size, num_minibatches).T, real.reshape(size, num_minibatches).T
 
 
 def apply_if(pred: jax.Array, new: Any, old: Any) -> Any:
@@ -217,7 +226,7 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
             return (params, opt_state, grad_steps + has_decision.astype(jnp.int32)), aux
 
         def epoch_step(carry, epoch_key):
-            idx, real = minibatch_indices(epoch_key, num_items, config.num_minibatches)
+            idx, real = minibatch_indices(epoch_key, data[-1], config.num_minibatches)
             return jax.lax.scan(minibatch_step, carry, (idx, real))
 
         carry = (state.params, state.opt_state, state.grad_steps)
