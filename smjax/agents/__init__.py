@@ -1,7 +1,16 @@
 """Learners: PPO, DQN and the paper's actor-critic, all over SMDP decisions.
 
 ``make_agent("ppo", learning_rate=3e-4)`` builds an :class:`smjax.agents.base.Agent`
-from the algorithm's config dataclass with the given fields overridden.
+from the algorithm's config dataclass with the given fields overridden::
+
+    agent = make_agent("actor-critic")
+    state = agent.init(key, example_obs, num_actions)           # example_obs unbatched
+    out = agent.act(state, obs, mask, key)                       # obs [B, ...], mask [B, A]
+    state, metrics = agent.update(state, traj, last_obs, key)    # traj: Transition [T, B]
+    logits = agent.policy_logits(state.params, obs)              # greedy scores [B, A]
+
+Flat training on an ordinary environment: ``smjax.agents.flat_train.make_train``.
+Returns over decisions: ``smjax.agents.smdp`` (``smdp_gae``, ``smdp_transitions``).
 """
 from __future__ import annotations
 
