@@ -52,8 +52,11 @@ def _add_train(sub):
     p.add_argument("task", help="registered task, e.g. craft/get_gem (see `smjax list`)")
     p.add_argument("--method", choices=METHODS, default=None, help="default: top-down")
     p.add_argument("--algo", choices=ALGOS, default=None, help="learner for every level (default: ppo)")
-    p.add_argument("--seeds", type=int, default=1, help="number of seeds (0..N-1, shifted by --seed-offset)")
+    p.add_argument("--seeds", type=int, default=None, help="number of seeds (0..N-1, shifted by --seed-offset; default 1)")
     p.add_argument("--seed-offset", type=int, default=0)
+    p.add_argument("--resume", default=None, metavar="DIR",
+                   help="continue the run checkpointed in DIR (its saved config is the base; "
+                        "flags that contradict it are refused)")
     p.add_argument("--out", default=None, help="output directory (default: runs/ENV_TASK_METHOD)")
     p.add_argument("--config", default=None, help="YAML or JSON file with TrainConfig fields")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE", help="override a TrainConfig field")
@@ -71,7 +74,22 @@ def _cmd_train(args) -> int:
     from smjax.train.config import ConfigError, TrainConfig
     from smjax.train.run import run
 
-    data = TrainConfig.from_file(args.config).to_dict() if args.config else {}
+    from smjax.train import checkpoint as ckpt
+
+    saved = None
+    if args.resume:
+        info = ckpt.load_meta(args.resume)
+        if info is None:
+            print(f"error: nothing to resume: no checkpoint in {args.resume}", file=sys.stderr)
+            return 2
+        saved = info["meta"]["run"]
+        if saved["task"] != args.task:
+            print(f"error: {args.resume} is a run of {saved['task']!r}, not {args.task!r}", file=sys.stderr)
+            return 2
+    names = set(TrainConfig.__dataclass_fields__)
+    data = {k: v for k, v in saved.items() if k in names} if saved else {}
+    if args.config:
+        data.update(TrainConfig.from_file(args.config).to_dict())
     data.update(_key_values(args.set, "--set"))
     for field, value in (("method", args.method), ("algo", args.algo), ("hierarchy", args.hierarchy),
                          ("num_envs", args.num_envs), ("threshold", args.threshold),
@@ -85,17 +103,22 @@ def _cmd_train(args) -> int:
     except (ConfigError, TypeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    env_over = _key_values(args.env, "--env")
+    env_over = dict(saved["env_overrides"]) if saved else {}
+    env_over.update(_key_values(args.env, "--env"))
     if args.fixed_map:
         env_over["fixed_map"] = True
-    if args.seeds < 1:
+    if args.seeds is not None and args.seeds < 1:
         print("error: --seeds must be >= 1", file=sys.stderr)
         return 2
-    seeds = list(range(args.seed_offset, args.seed_offset + args.seeds))
-    out = args.out or f"runs/{args.task.replace('/', '_')}_{cfg.method}"
+    if args.seeds is None and saved:
+        seeds = list(saved["seeds"])
+    else:
+        seeds = list(range(args.seed_offset, args.seed_offset + (args.seeds or 1)))
+    out = args.resume or args.out or f"runs/{args.task.replace('/', '_')}_{cfg.method}"
     try:
-        results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet)
-    except (KeyError, ValueError, TypeError) as err:
+        results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
+                      resume=bool(args.resume))
+    except (KeyError, ValueError, TypeError, FileExistsError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     summary = {k: results[k] for k in ("env", "task", "method", "algo", "episodes_to_threshold",

@@ -36,7 +36,8 @@ class TrainConfig:
       frozen_policy: how trained options act when frozen (auto: greedy for dqn, else sample).
       eval_envs: episodes run (one per environment) to measure final_success.
       eval_max_ticks: cap on an evaluation episode's length.
-      checkpoint_every: seconds between checkpoints (0 disables periodic checkpoints).
+      checkpoint_every: seconds between checkpoints when an output directory is given
+        (0: after every chunk); a checkpoint is also written at the end of every level.
     """
 
     method: str = "top-down"

@@ -4,21 +4,29 @@ It runs compiled chunks (``Engine.chunk``) and, between them, counts episodes, c
 each seed's running success against the threshold, draws progress, records curves and
 writes checkpoints; it never steps an environment itself. All seeds train together in
 one compiled program; a seed that has finished a level is frozen (its updates are
-masked) until every seed has finished it.
+masked) until every seed has finished it. Everything the loop knows lives in
+``arrays`` (device state) and ``host`` (JSON-able counters), which is exactly what a
+checkpoint holds, so a resumed run continues bit for bit.
 """
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass, field
-from typing import Any, Callable
+from dataclasses import dataclass
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from smjax.options.hierarchy import Hierarchy
+from smjax.train import checkpoint as ckpt
 from smjax.train.config import TrainConfig
 from smjax.train.engine import Engine, SeedState
+
+
+class NonFiniteError(FloatingPointError):
+    """A learner produced non-finite parameters; the last good checkpoint is kept."""
 
 
 @dataclass
@@ -27,16 +35,6 @@ class LevelPlan:
     option: int      # its option id
     start: int       # option at the bottom of the stack at each reset
     level: int       # the paper's level number
-
-
-@dataclass
-class LevelRecord:
-    template: str
-    level: int
-    episodes: list = field(default_factory=list)
-    env_steps: list = field(default_factory=list)
-    reached: list = field(default_factory=list)
-    final_running_success: list = field(default_factory=list)
 
 
 def resolve_hierarchy(env, cfg: TrainConfig) -> tuple[str, Hierarchy]:
@@ -68,8 +66,8 @@ def plan_levels(h: Hierarchy, method: str) -> list[LevelPlan]:
     return plans
 
 
-def _running_success(history: list[tuple[float, int]], window: int) -> float:
-    """Mean success over (at least) the last ``window`` learner episodes."""
+def running_success(history: list, window: int) -> float:
+    """Mean success over (at least) the last ``window`` learner episodes (NaN if fewer)."""
     total, count = 0.0, 0
     for s, c in reversed(history):
         total, count = total + s, count + c
@@ -78,93 +76,179 @@ def _running_success(history: list[tuple[float, int]], window: int) -> float:
     return total / count if count >= window else float("nan")
 
 
-def train_hierarchy(engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
-                    progress: bool = True, on_chunk: Callable[..., Any] | None = None) -> dict:
-    """Train every planned level for all seeds; returns raw results (see ``results.py``)."""
-    cfg, h = engine.cfg, engine.h
-    S = len(seeds)
-    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
-    bank, learned = None, jnp.zeros((S, h.num_options), bool)
-    levels, curves = [], []
-    compile_s, t_start = 0.0, time.perf_counter()
-    compiled = None
-    steps_per_update = cfg.num_envs * cfg.rollout_ticks
-    for plan in plans:
-        keys, k_init, k_reset, k_run = _split_seeds(keys, 4)
-        learner = engine.init_learner(k_init)
-        if bank is None:
-            bank = engine.new_bank(learner)
-        carry = engine.reset(k_reset, jnp.asarray(plan.start))
-        state = SeedState(carry, learner, k_run)
-        active = np.ones(S, bool)
-        record = LevelRecord(plan.name, plan.level)
-        episodes = np.zeros(S, np.int64)
-        env_steps = np.zeros(S, np.int64)
-        reached = np.zeros(S, bool)
-        history: list[list[tuple[float, int]]] = [[] for _ in range(S)]
-        running = np.full(S, np.nan)
-        bar = _progress_bar(progress, plan, cfg.max_episodes_per_level)
-        learner_arr, start_arr = jnp.asarray(plan.option), jnp.asarray(plan.start)
-        while active.any():
-            args = (state, jnp.asarray(active), bank, learned, learner_arr, start_arr)
-            if compiled is None:  # one compile serves every level (learner ids are traced)
-                t0 = time.perf_counter()
-                compiled = engine.chunk.lower(*args).compile()
-                compile_s += time.perf_counter() - t0
-            t0 = time.perf_counter()
-            state, stats, _ = compiled(*args)
-            stats = jax.tree.map(np.asarray, stats)  # [S, U]
-            dt = time.perf_counter() - t0
-            for s in range(S):
-                if not active[s]:
-                    continue
-                for u in range(cfg.updates_per_chunk):
-                    episodes[s] += int(stats.env_episodes[s, u])
-                    env_steps[s] += steps_per_update
-                    n = int(stats.learner_episodes[s, u])
-                    if n:
-                        history[s].append((float(stats.learner_success[s, u]), n))
-                    running[s] = _running_success(history[s], cfg.success_window)
-                    curves.append((seeds[s], plan.level, plan.name, int(episodes[s]),
-                                   int(env_steps[s]), running[s]))
-                if running[s] >= cfg.threshold:
-                    reached[s], active[s] = True, False
-                elif episodes[s] >= cfg.max_episodes_per_level:
-                    active[s] = False
-            if bar is not None:
-                bar.n = int(min(episodes.mean(), cfg.max_episodes_per_level))
-                rate = cfg.updates_per_chunk * steps_per_update * S / max(dt, 1e-9)
-                bar.set_postfix(success=f"{np.nanmean(running) if np.isfinite(running).any() else 0:.2f}",
-                                done=f"{int((~active).sum())}/{S}", steps_s=f"{rate:,.0f}")
-                bar.refresh()
-            if on_chunk is not None:
-                on_chunk(plan=plan, state=state, episodes=episodes, running=running)
-        if bar is not None:
-            bar.close()
-        bank = engine.store_in_bank(bank, state.learner.params, plan.option)
-        learned = learned.at[:, plan.option].set(True)
-        record.episodes, record.env_steps = episodes.tolist(), env_steps.tolist()
-        record.reached = reached.tolist()
-        record.final_running_success = [None if np.isnan(x) else float(x) for x in running]
-        levels.append(record)
-    keys, k_eval = _split_seeds(keys, 2)
-    t0 = time.perf_counter()
-    evaluate = engine.evaluate.lower(k_eval, bank, learned).compile()
-    compile_s += time.perf_counter() - t0
-    final = jax.tree.map(np.asarray, evaluate(k_eval, bank, learned))
-    wall = time.perf_counter() - t_start
-    return {"levels": levels, "curves": curves, "final": final, "bank": bank,
-            "learned": learned, "wall_seconds": wall, "compile_seconds": compile_s}
-
-
 def _split_seeds(keys: jax.Array, n: int) -> list[jax.Array]:
     split = jax.vmap(lambda k: jax.random.split(k, n))(keys)
     return [split[:, i] for i in range(n)]
 
 
-def _progress_bar(enabled: bool, plan: LevelPlan, total: int):
-    if not enabled:
-        return None
-    from tqdm.auto import tqdm
+def _all_finite(tree) -> bool:
+    return all(bool(jnp.isfinite(x).all()) for x in jax.tree.leaves(tree)
+               if jnp.issubdtype(x.dtype, jnp.floating))
 
-    return tqdm(total=total, desc=f"level {plan.level} {plan.name}", unit="ep", leave=True)
+
+class HierarchyTrainer:
+    """Trains every planned level for all seeds; resumable from its checkpoints."""
+
+    def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
+                 out_dir=None, progress: bool = True, run_meta: dict | None = None):
+        self.engine, self.plans, self.seeds = engine, plans, list(seeds)
+        self.cfg = engine.cfg
+        self.out_dir, self.progress = out_dir, progress
+        self.run_meta = run_meta or {}
+        S = len(self.seeds)
+        keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
+        keys, k_init, k_reset = _split_seeds(keys, 3)
+        learner = engine.init_learner(k_init)
+        self.arrays = {
+            "keys": keys,
+            "state": SeedState(engine.reset(k_reset, jnp.asarray(0)), learner, keys),
+            "bank": engine.new_bank(learner),
+            "learned": jnp.zeros((S, engine.h.num_options), bool),
+        }
+        self.host: dict[str, Any] = {
+            "plan_index": 0, "in_level": False, "levels": [], "curves": [],
+            "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": 0,
+        }
+        self._compiled = None
+        self._last_save = time.perf_counter()
+
+    # ---- checkpoints -------------------------------------------------------------
+    def save(self) -> None:
+        if self.out_dir is None:
+            return
+        meta = {"host": self.host, "run": self.run_meta}
+        ckpt.save_checkpoint(self.out_dir, self.host["chunks"], self.arrays, meta)
+        self._last_save = time.perf_counter()
+
+    def restore(self) -> bool:
+        info = ckpt.load_meta(self.out_dir) if self.out_dir is not None else None
+        if info is None:
+            return False
+        self.arrays = ckpt.load_arrays(self.out_dir, self.arrays)
+        self.host = info["meta"]["host"]
+        return True
+
+    # ---- the loop ------------------------------------------------------------------
+    def run(self) -> dict:
+        t_start = time.perf_counter() - self.host["wall_seconds"]
+        while self.host["plan_index"] < len(self.plans):
+            plan = self.plans[self.host["plan_index"]]
+            if not self.host["in_level"]:
+                self._start_level(plan)
+            self._train_level(plan, t_start)
+            self._finish_level(plan)
+            self.host["wall_seconds"] = time.perf_counter() - t_start
+            self.save()
+        keys, k_eval = _split_seeds(self.arrays["keys"], 2)
+        t0 = time.perf_counter()
+        evaluate = self.engine.evaluate.lower(k_eval, self.arrays["bank"], self.arrays["learned"]).compile()
+        self.host["compile_seconds"] += time.perf_counter() - t0
+        final = jax.tree.map(np.asarray, evaluate(k_eval, self.arrays["bank"], self.arrays["learned"]))
+        self.host["wall_seconds"] = time.perf_counter() - t_start
+        return {"levels": self.host["levels"], "curves": self.host["curves"], "final": final,
+                "bank": self.arrays["bank"], "learned": self.arrays["learned"],
+                "wall_seconds": self.host["wall_seconds"],
+                "compile_seconds": self.host["compile_seconds"]}
+
+    def _start_level(self, plan: LevelPlan) -> None:
+        S = len(self.seeds)
+        keys, k_init, k_reset, k_run = _split_seeds(self.arrays["keys"], 4)
+        learner = self.engine.init_learner(k_init)
+        carry = self.engine.reset(k_reset, jnp.asarray(plan.start))
+        self.arrays["keys"] = keys
+        self.arrays["state"] = SeedState(carry, learner, k_run)
+        self.host.update(in_level=True, episodes=[0] * S, env_steps=[0] * S, reached=[False] * S,
+                         active=[True] * S, history=[[] for _ in range(S)], running=[None] * S)
+
+    def _train_level(self, plan: LevelPlan, t_start: float) -> None:
+        cfg, host = self.cfg, self.host
+        steps_per_update = cfg.num_envs * cfg.rollout_ticks
+        bar = self._bar(plan)
+        learner_arr, start_arr = jnp.asarray(plan.option), jnp.asarray(plan.start)
+        while any(host["active"]):
+            active = jnp.asarray(host["active"])
+            args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
+                    learner_arr, start_arr)
+            if self._compiled is None:  # one compile serves every level (ids are traced)
+                t0 = time.perf_counter()
+                self._compiled = self.engine.chunk.lower(*args).compile()
+                host["compile_seconds"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            state, stats, _ = self._compiled(*args)
+            stats = jax.tree.map(np.asarray, stats)  # [S, U]
+            dt = time.perf_counter() - t0
+            if not _all_finite(state.learner.params):
+                raise NonFiniteError(
+                    f"non-finite learner parameters at level {plan.level} ({plan.name}) after "
+                    f"{max(host['episodes'])} episodes (chunk {host['chunks']}); the last good "
+                    f"checkpoint is kept")
+            self.arrays["state"] = state
+            self._account(plan, stats, steps_per_update)
+            host["chunks"] += 1
+            host["wall_seconds"] = time.perf_counter() - t_start
+            if bar is not None:
+                self._draw(bar, dt, steps_per_update)
+            if self.out_dir is not None and time.perf_counter() - self._last_save >= cfg.checkpoint_every:
+                self.save()
+        if bar is not None:
+            bar.close()
+
+    def _account(self, plan: LevelPlan, stats, steps_per_update: int) -> None:
+        cfg, host = self.cfg, self.host
+        for s, seed in enumerate(self.seeds):
+            if not host["active"][s]:
+                continue
+            for u in range(cfg.updates_per_chunk):
+                host["episodes"][s] += int(stats.env_episodes[s, u])
+                host["env_steps"][s] += steps_per_update
+                n = int(stats.learner_episodes[s, u])
+                if n:
+                    host["history"][s].append([float(stats.learner_success[s, u]), n])
+                run = running_success(host["history"][s], cfg.success_window)
+                host["running"][s] = None if math.isnan(run) else run
+                host["curves"].append([seed, plan.level, plan.name, host["episodes"][s],
+                                       host["env_steps"][s], host["running"][s]])
+            # keep only as much history as the window needs
+            hist, count, keep = host["history"][s], 0, 0
+            for _, c in reversed(hist):
+                keep, count = keep + 1, count + c
+                if count >= cfg.success_window:
+                    break
+            host["history"][s] = hist[len(hist) - keep:]
+            run = host["running"][s]
+            if run is not None and run >= cfg.threshold:
+                host["reached"][s], host["active"][s] = True, False
+            elif host["episodes"][s] >= cfg.max_episodes_per_level:
+                host["active"][s] = False
+
+    def _finish_level(self, plan: LevelPlan) -> None:
+        host, arrays = self.host, self.arrays
+        arrays["bank"] = self.engine.store_in_bank(arrays["bank"], arrays["state"].learner.params,
+                                                   plan.option)
+        arrays["learned"] = arrays["learned"].at[:, plan.option].set(True)
+        host["levels"].append({
+            "template": plan.name, "level": plan.level, "episodes": list(host["episodes"]),
+            "env_steps": list(host["env_steps"]), "reached": list(host["reached"]),
+            "final_running_success": list(host["running"]),
+        })
+        host["plan_index"] += 1
+        host["in_level"] = False
+
+    # ---- progress --------------------------------------------------------------------
+    def _bar(self, plan: LevelPlan):
+        if not self.progress:
+            return None
+        from tqdm.auto import tqdm
+
+        return tqdm(total=self.cfg.max_episodes_per_level, desc=f"level {plan.level} {plan.name}",
+                    unit="ep", leave=True, initial=int(np.mean(self.host["episodes"])))
+
+    def _draw(self, bar, dt: float, steps_per_update: int) -> None:
+        host = self.host
+        bar.n = int(min(np.mean(host["episodes"]), self.cfg.max_episodes_per_level))
+        rate = self.cfg.updates_per_chunk * steps_per_update * len(self.seeds) / max(dt, 1e-9)
+        runs = [r for r in host["running"] if r is not None]
+        bar.set_postfix(success=f"{np.mean(runs) if runs else 0:.2f}",
+                        done=f"{len(self.seeds) - sum(host['active'])}/{len(self.seeds)}",
+                        steps_s=f"{rate:,.0f}")
+        bar.refresh()

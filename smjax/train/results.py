@@ -44,9 +44,9 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
     levels = raw["levels"]
     per_seed_eps, per_seed_steps = [], []
     for s in range(len(seeds)):
-        ok = all(rec.reached[s] for rec in levels)
-        per_seed_eps.append(sum(rec.episodes[s] for rec in levels) if ok else None)
-        per_seed_steps.append(sum(rec.env_steps[s] for rec in levels) if ok else None)
+        ok = all(rec["reached"][s] for rec in levels)
+        per_seed_eps.append(sum(rec["episodes"][s] for rec in levels) if ok else None)
+        per_seed_steps.append(sum(rec["env_steps"][s] for rec in levels) if ok else None)
     final = raw["final"]
     return _clean({
         "env": env,
@@ -59,12 +59,7 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
         "env_steps_to_threshold": per_seed_steps,
         "final_success": [float(x) for x in final["success"]],
         "final_return": [float(x) for x in final["return"]],
-        "levels": [
-            {"template": r.template, "level": r.level, "episodes": r.episodes,
-             "env_steps": r.env_steps, "reached": r.reached,
-             "final_running_success": r.final_running_success}
-            for r in levels
-        ],
+        "levels": [dict(r) for r in levels],
         "wall_seconds": raw["wall_seconds"],
         "compile_seconds": raw["compile_seconds"],
         "device": jax.devices()[0].platform,

@@ -1,0 +1,59 @@
+"""Checkpoints: arrays with orbax, host-side counters as JSON, swapped in atomically.
+
+Layout of ``DIR/checkpoints``: ``step-N/`` (an orbax checkpoint of the array state) and
+``latest.json`` (the host state and the name of the newest complete ``step-N``).
+``latest.json`` is replaced only after orbax has finished writing, so a crash at any
+moment leaves the previous good checkpoint in force; older steps are then deleted.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import jax
+
+from smjax.train.results import atomic_write_text
+
+LATEST = "latest.json"
+
+
+def checkpoint_dir(out_dir: str | Path) -> Path:
+    return Path(out_dir) / "checkpoints"
+
+
+def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> Path:
+    import orbax.checkpoint as ocp
+
+    root = checkpoint_dir(out_dir).resolve()
+    root.mkdir(parents=True, exist_ok=True)
+    target = root / f"step-{step}"
+    if target.exists():  # leftover of a crash before latest.json pointed at it
+        shutil.rmtree(target)
+    checkpointer = ocp.StandardCheckpointer()
+    checkpointer.save(target, arrays)
+    checkpointer.wait_until_finished()
+    atomic_write_text(root / LATEST, json.dumps({"step": step, "path": target.name, "meta": meta}))
+    for old in root.glob("step-*"):
+        if old.name != target.name:
+            shutil.rmtree(old, ignore_errors=True)
+    return target
+
+
+def load_meta(out_dir: str | Path) -> dict | None:
+    latest = checkpoint_dir(out_dir) / LATEST
+    if not latest.exists():
+        return None
+    return json.loads(latest.read_text())
+
+
+def load_arrays(out_dir: str | Path, like: Any) -> Any:
+    import orbax.checkpoint as ocp
+
+    info = load_meta(out_dir)
+    if info is None:
+        raise FileNotFoundError(f"no checkpoint in {checkpoint_dir(out_dir)}")
+    abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, like)
+    path = (checkpoint_dir(out_dir) / info["path"]).resolve()
+    return ocp.StandardCheckpointer().restore(path, abstract)
