@@ -54,6 +54,14 @@ SETTLED_SPEED = 0.02
 OPEN_FINGER = 0.038
 REACH_XY_BAND = 0.01
 OPEN, CLOSE = 1.0, -1.0
+#: Neighbour avoidance when grasping (see ``grasp_offset``): a block closer than
+#: FINGER_ZONE_Y along y is in the fingers' path when its x-distance is below
+#: FINGER_CLEAR_X (finger half-width 0.015 + block half-width 0.025 + 5 mm).
+FINGER_ZONE_Y = 0.085
+FINGER_CLEAR_X = 0.045
+MAX_GRASP_SHIFT = 0.025
+#: Grip height above a block's centre at which the fingertips clear its top (0.045 + margin).
+CLEAR_ABOVE = 0.06
 #: Carrying moves at most 3 cm per step: sharper accelerations make the block swivel in
 #: the fingers.
 CARRY_SPEED = 0.6
@@ -104,16 +112,50 @@ def is_gripping(state: FetchState, i: int) -> jax.Array:
     return block_wide & commanded_shut & (block_to_grip(state, i) < HOLD_TOL)
 
 
+def grasp_offset(state: FetchState, i: int) -> jax.Array:
+    """float32[3]: where to grasp block i relative to its centre, to keep fingers off neighbours.
+
+    The fingers close along y and are 3 cm wide in x, so a neighbour lying beside block i
+    along y (|dy| < ``FINGER_ZONE_Y``) and overlapping the fingers in x would be hit by a
+    finger coming down. Grasping block i off-centre along x (up to ``MAX_GRASP_SHIFT``,
+    which leaves 1.5 cm of finger on the block) moves the fingers away from it.
+    """
+    blocks = st.block_pos(state)
+    rel = blocks - blocks[i]
+    others = jnp.arange(blocks.shape[0]) != i
+    beside = (jnp.abs(rel[:, 1]) < FINGER_ZONE_Y) & (jnp.abs(rel[:, 2]) < 0.06) & others
+    overlap = jnp.maximum(FINGER_CLEAR_X - jnp.abs(rel[:, 0]), 0.0)
+    push = jnp.where(beside, -jnp.sign(rel[:, 0]) * overlap, 0.0)
+    shift = jnp.clip(jnp.sum(push), -MAX_GRASP_SHIFT, MAX_GRASP_SHIFT)
+    return jnp.stack([shift, 0.0, 0.0])
+
+
+def is_stuck(state: FetchState, i: int) -> jax.Array:
+    """Fingers commanded shut at block i but held open wider than it (a finger sits on
+    something): closing further cannot succeed, so back off and reach again."""
+    return (is_reached(state, i) & (jnp.max(state.data.ctrl) < 0.01)
+            & (finger_gap(state) > GRIP_GAP[1]) & fingers_settled(state))
+
+
 def reach(state: FetchState, params: FetchParams, i: int) -> jax.Array:
     """Open the fingers, move over block i (never descending while xy is off), then down."""
     grip = st.gripper_pos(state)
-    block = st.block_pos(state)[i]
+    block = st.block_pos(state)[i] + grasp_offset(state, i)
     err = block - grip
     xy_off = jnp.linalg.norm(err[:2]) > REACH_XY_BAND
     # While xy is off, hold (or regain) a height where the fingertips clear the block tops.
     hover_z = jnp.maximum(grip[2], block[2] + 2 * BLOCK_HALF)
     z_err = jnp.where(xy_off, hover_z - grip[2], err[2])
-    return _command(jnp.stack([err[0], err[1], z_err]), _open_command(state))
+    # Fingers still around another block (e.g. the one just released on the tower):
+    # rise above it before any sideways move, or it is dragged along.
+    blocks = st.block_pos(state)
+    others = jnp.arange(blocks.shape[0]) != i
+    around = others & (jnp.linalg.norm(blocks[:, :2] - grip[:2], axis=-1) < 0.08)
+    clear_z = jnp.max(jnp.where(around, blocks[:, 2] + CLEAR_ABOVE, -jnp.inf))
+    trapped = xy_off & (grip[2] < clear_z - 0.005)
+    move_xy = jnp.where(trapped, jnp.zeros(2), err[:2])
+    z_err = jnp.where(trapped, clear_z - grip[2], z_err)
+    return _command(jnp.concatenate([move_xy, z_err[None]]), _open_command(state))
 
 
 def carry(state: FetchState, params: FetchParams, i: int) -> jax.Array:
@@ -135,13 +177,19 @@ def carry(state: FetchState, params: FetchParams, i: int) -> jax.Array:
 
 
 def pick(state: FetchState, params: FetchParams, i: int) -> jax.Array:
-    """Close on block i, then carry it onto its goal; re-reach it if it is not in the fingers."""
+    """Close on block i, then carry it onto its goal; re-reach it if it is not in the fingers.
+
+    If the closing fingers are blocked (``is_stuck``), open and rise 5 cm, after which
+    the reach comes down again (with the neighbour-avoiding grasp offset).
+    """
     gripping = is_gripping(state, i)
     carrying = gripping & fingers_settled(state)
     closing = (is_reached(state, i) | gripping) & ~carrying
     hold_still = _command(jnp.zeros(3), CLOSE)
-    return jnp.where(carrying, carry(state, params, i),
-                     jnp.where(closing, hold_still, reach(state, params, i)))
+    back_off = jnp.asarray([0.0, 0.0, 1.0, OPEN], jnp.float32)
+    action = jnp.where(carrying, carry(state, params, i),
+                       jnp.where(closing, hold_still, reach(state, params, i)))
+    return jnp.where(is_stuck(state, i), back_off, action)
 
 
 def release(state: FetchState, params: FetchParams, i: int) -> jax.Array:
