@@ -1,0 +1,64 @@
+"""Fetch & Stack rendering (skipped without an OpenGL backend) and the Brax adapter."""
+import os
+
+os.environ.setdefault("JAX_PLATFORMS", "cpu")
+# A headless machine needs EGL or OSMesa; respect a user's choice, default to EGL.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import smjax
+
+
+def _gl_available() -> tuple[bool, str]:
+    import mujoco
+
+    try:
+        model = mujoco.MjModel.from_xml_string(
+            '<mujoco><worldbody><geom type="box" size=".1 .1 .1"/></worldbody></mujoco>')
+        mujoco.Renderer(model, 16, 16).close()
+        return True, ""
+    except Exception as err:  # which exception depends on the backend
+        return False, f"no OpenGL backend for MUJOCO_GL={os.environ.get('MUJOCO_GL')}: {err}"
+
+
+def test_render_returns_rgb_frame_showing_the_scene():
+    ok, why = _gl_available()
+    if not ok:
+        pytest.skip(why)
+    env, params = smjax.make("fetch/stack3")
+    _, state = jax.jit(env.reset_env)(jax.random.PRNGKey(0), params)
+    frame = env.render(state, params)
+    assert frame.dtype == np.uint8 and frame.shape == (360, 480, 3)
+    assert frame.std() > 10  # not a blank image
+    moved = state.replace(data=state.data.replace(qpos=state.data.qpos.at[9:12].set(
+        jnp.asarray([1.30, 0.75, 0.6]))))
+    assert np.abs(env.render(moved, params).astype(int) - frame.astype(int)).sum() > 0
+    with pytest.raises(ValueError, match="unbatched"):
+        env.render(jax.tree.map(lambda x: x[None], state), params)
+
+
+def test_brax_adapter_runs_under_brax_training_wrapper():
+    from brax.envs.base import Env
+    from brax.envs.wrappers import training
+
+    from smjax.envs.fetch.brax_adapter import BraxFetchEnv
+
+    env = BraxFetchEnv(num_blocks=1)
+    assert isinstance(env, Env)
+    assert env.observation_size == 25 and env.action_size == 4 and env.backend == "mjx"
+    wrapped = training.wrap(env, episode_length=3)
+    keys = jax.random.split(jax.random.PRNGKey(0), 2)
+    state = jax.jit(wrapped.reset)(keys)
+    step = jax.jit(wrapped.step)
+    dones = []
+    for _ in range(3):
+        state = step(state, jnp.zeros((2, 4)))
+        dones.append(np.asarray(state.done))
+    assert state.obs.shape == (2, 25) and np.all(np.isfinite(np.asarray(state.obs)))
+    # the episode wrapper truncates at episode_length and auto-resets
+    np.testing.assert_array_equal(dones[-1], [1.0, 1.0])
+    assert "score" in state.metrics and "is_success" in state.metrics
