@@ -132,10 +132,10 @@ def make_craft(
         isinstance(max_steps, bool) or not isinstance(max_steps, int) or not 1 <= max_steps < 2**31
     ):
         raise ValueError(f"max_steps must be None or an int in [1, 2**31), got {max_steps!r}")
-    if isinstance(map_seed, bool) or not isinstance(map_seed, int) or not 0 <= map_seed < 2**32:
-        raise ValueError(f"map_seed must be an int in [0, 2**32), got {map_seed!r}")
+    if isinstance(map_seed, bool) or not isinstance(map_seed, int) or not 0 <= map_seed < 2**31:
+        raise ValueError(f"map_seed must be an int in [0, 2**31), got {map_seed!r}")
     env = CraftEnv(CraftConfig(task=task, observation=observation))
-    fixed_state = env.new_state(jax.random.PRNGKey(map_seed)) if fixed_map else None
+    fixed_state = env.new_state(jax.random.key(map_seed)) if fixed_map else None
     return env, make_params(task, max_steps=max_steps, fixed_state=fixed_state)
 
 

@@ -59,6 +59,13 @@ def _facing(direction: jax.Array) -> jax.Array:
     return direction == jnp.arange(4)
 
 
+def _or_reduce(words: jax.Array, axis: int) -> jax.Array:
+    # A reduce (rather than chained ``|``) is a fusion root XLA materialises, so the unpack
+    # below reads 50 stored words instead of recomputing the gathers and ORs for each of
+    # its 1550 output bits (measured 1.6x faster for the whole observation on CPU).
+    return jax.lax.reduce(words, np.uint32(0), jax.lax.bitwise_or, (axis,))
+
+
 def paper_obs(state: CraftState) -> jax.Array:
     """The reference's 1586 features as uint8 (layout in the module docstring)."""
     x, y = state.pos[0], state.pos[1]
@@ -68,11 +75,9 @@ def paper_obs(state: CraftState) -> jax.Array:
     local = jax.lax.dynamic_slice(jnp.pad(words, 2), (x, y), (5, 5))
     # Pooled 25 x 25: OR over x-runs of 5, then over y-runs of 5.
     wx = jax.lax.dynamic_slice(jnp.pad(words, ((12, 12), (0, 0))), (x, 0), (25, N))
-    wx = wx.reshape(5, 5, N)
-    bx = wx[:, 0] | wx[:, 1] | wx[:, 2] | wx[:, 3] | wx[:, 4]  # [5, N]
+    bx = _or_reduce(wx.reshape(5, 5, N), 1)  # [5, N]
     wy = jax.lax.dynamic_slice(jnp.pad(bx, ((0, 0), (12, 12))), (0, y), (5, 25))
-    wy = wy.reshape(5, 5, 5)
-    blocks = wy[..., 0] | wy[..., 1] | wy[..., 2] | wy[..., 3] | wy[..., 4]  # [5, 5]
+    blocks = _or_reduce(wy.reshape(5, 5, 5), 2)  # [5, 5]
     # One unpack of all 50 words to 50 x 31 bits: the first 1550 features in order.
     all_words = jnp.concatenate([local.reshape(-1), blocks.reshape(-1)])
     bits = (all_words[:, None] >> jnp.arange(K, dtype=jnp.uint32)) & jnp.uint32(1)
