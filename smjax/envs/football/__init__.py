@@ -8,7 +8,6 @@ Registers ``football/11v11_easy``, ``football/11v11_medium`` and ``football/11v1
 from __future__ import annotations
 
 from smjax.core.registry import register
-from smjax.envs.football.builtin_ai import builtin_ai
 from smjax.envs.football.env import DIFFICULTIES, FootballEnv
 from smjax.envs.football.match import play_match
 from smjax.envs.football.state import FootballParams, FootballState, initial_state, mirror_state
@@ -28,5 +27,5 @@ for _level, _value in DIFFICULTIES.items():
     register(f"football/11v11_{_level}", _factory(_level),
              f"11 vs 11 football against the built-in AI at difficulty {_value} ({_level})")
 
-__all__ = ["FootballEnv", "FootballParams", "FootballState", "DIFFICULTIES", "builtin_ai",
+__all__ = ["FootballEnv", "FootballParams", "FootballState", "DIFFICULTIES",
            "play_match", "initial_state", "mirror_state"]

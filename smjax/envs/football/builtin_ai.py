@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from smjax.envs.football import constants as C
 from smjax.envs.football.physics import DIRS
@@ -36,36 +37,135 @@ _FORM = jnp.asarray(C.FORMATION)
 _IS_GK = jnp.arange(C.NUM_PLAYERS) == C.GOALKEEPER
 
 
+_TAN_22_5 = 0.41421356
+
+
 def quantize_direction(vec: jax.Array) -> jax.Array:
-    """Action 1..8 whose direction is closest to each vector f32[..., 2]."""
-    return (jnp.argmax(vec @ _DIRS8.T, axis=-1) + 1).astype(jnp.int32)
+    """Action 1..8 whose direction is closest to each vector f32[..., 2] (RIGHT for 0).
+
+    Sector arithmetic instead of an 8-way argmax: it is exactly odd (-v gives the
+    opposite direction), which the mirror symmetry needs, and cheap under vmap.
+    """
+    x, y = vec[..., 0], vec[..., 1]
+    ax, ay = jnp.abs(x), jnp.abs(y)
+    sx = jnp.where(ax > _TAN_22_5 * ay, jnp.sign(x), 0.0).astype(jnp.int32)
+    sy = jnp.where(ay > _TAN_22_5 * ax, jnp.sign(y), 0.0).astype(jnp.int32)
+    # top row: 2 3 4, middle: 1 . 5, bottom row: 8 7 6 (y grows downward).
+    action = jnp.where(sy < 0, 3 + sx, jnp.where(sy > 0, 7 - sx, 3 + 2 * sx))
+    return jnp.where((sx == 0) & (sy == 0), C.RIGHT, action).astype(jnp.int32)
 
 
 def _lane_blockers(start: jax.Array, ends: jax.Array, opp: jax.Array, width: float) -> jax.Array:
     """For passes start -> ends[j]: how many opponents stand within ``width`` of the lane."""
     ab = ends - start                                             # [11, 2]
     ao = opp - start                                              # [11, 2]
-    t = jnp.clip((ab @ ao.T) / (jnp.sum(ab * ab, axis=1, keepdims=True) + 1e-9), 0.0, 1.0)
-    closest = start + t[..., None] * ab[:, None, :]               # [11 mates, 11 opp, 2]
-    d = jnp.linalg.norm(closest - opp[None], axis=-1)
-    return jnp.sum((d < width) & (t > 0.05), axis=1)
+    # Elementwise products, not matmuls: tiny batched dots are slow on CPU under vmap.
+    proj = ab[:, None, 0] * ao[None, :, 0] + ab[:, None, 1] * ao[None, :, 1]
+    t = jnp.clip(proj / (jnp.sum(ab * ab, axis=1, keepdims=True) + 1e-9), 0.0, 1.0)
+    gap = start + t[..., None] * ab[:, None, :] - opp[None]       # [11 mates, 11 opp, 2]
+    d2 = gap[..., 0] ** 2 + gap[..., 1] ** 2
+    return jnp.sum((d2 < width * width) & (t > 0.05), axis=1)
+
+
+@struct.dataclass
+class TeamView:
+    """What one team's AI reads, in that team's frame (attacking toward x = +1)."""
+
+    team: jax.Array        # i32 0 left, 1 right
+    own: jax.Array         # f32[11, 2]
+    opp: jax.Array         # f32[11, 2]
+    facing: jax.Array      # f32[11, 2]
+    uniform: jax.Array     # f32[11, NUM_UNIFORM]
+    normal: jax.Array      # f32[11, NUM_NORMAL]
+    cur_dir: jax.Array     # i32[11] sticky direction, in the team frame
+    cur_sprint: jax.Array  # bool[11]
+    cur_dribble: jax.Array  # bool[11]
+    prev: jax.Array        # i32[11] previous AI action, in the team frame
+
+
+def team_view(state: FootballState, noise: Noise, team: int) -> TeamView:
+    """The view of a static ``team`` (plain slicing: no gathers on the per-step path)."""
+    n = C.NUM_PLAYERS
+    mine, theirs = (slice(0, n), slice(n, 2 * n)) if team == 0 else (slice(n, 2 * n), slice(0, n))
+    sign = 1.0 if team == 0 else -1.0
+    turn = (lambda a: a) if team == 0 else mirror_action
+    return TeamView(
+        team=jnp.int32(team), own=state.pos[mine] * sign, opp=state.pos[theirs] * sign,
+        facing=state.facing[mine] * sign, uniform=noise.uniform[mine], normal=noise.normal[mine],
+        cur_dir=turn(state.sticky_dir[mine]), cur_sprint=state.sprint[mine],
+        cur_dribble=state.dribble[mine], prev=turn(state.ai_prev[mine]),
+    )
 
 
 def team_actions(state: FootballState, team: jax.Array, difficulty: jax.Array, noise: Noise) -> jax.Array:
     """Actions i32[11] (0..18, absolute directions) of ``team``'s built-in AI."""
+    views = [team_view(state, noise, t) for t in (0, 1)]
+    view = jax.tree.map(lambda a, b: jnp.where(jnp.asarray(team) == 1, b, a), *views)
+    return decide(state, view, difficulty, carrier_plan(state, view, difficulty))
+
+
+def carrier_plan(state: FootballState, view: TeamView, difficulty: jax.Array) -> tuple:
+    """What the carrier of ``view``'s team wants: (direction, sprint, kick, dribble).
+
+    Only one team has a carrier, so ``all_actions`` evaluates this once per tick, in
+    the carrier's team frame (the pairwise lane checks are the AI's dearest part).
+    """
     d = jnp.clip(jnp.asarray(difficulty, jnp.float32), 0.0, 1.0)
+    team = view.team
+    own, opp, u, n = view.own, view.opp, view.uniform, view.normal
+    carrier = jnp.where(player_team(state.owner) == team, state.owner - C.NUM_PLAYERS * team, -1)
+    is_carrier = jnp.arange(C.NUM_PLAYERS) == carrier
+    c = jnp.maximum(carrier, 0)
+    me = own[c]
+    to_goal = jnp.array([1.0, 0.0]) - me
+    dist_goal = jnp.linalg.norm(to_goal)
+    goal_unit = to_goal / (dist_goal + 1e-9)
+    probe = me + 0.08 * _DIRS8                                     # [8, 2]
+    # Crowding of each probe point: a polynomial bump of radius 0.08 per opponent
+    # (cheaper than a Gaussian and just as smooth where it matters).
+    gap = probe[:, None] - opp[None]
+    crowd = jnp.sum(jnp.maximum(1.0 - (gap[..., 0] ** 2 + gap[..., 1] ** 2) / 0.08**2, 0.0) ** 2, 1)
+    off_pitch = (jnp.abs(probe[:, 1]) > 0.39) | (probe[:, 0] > 0.97) | (probe[:, 0] < -0.97)
+    dribble_score = ((_DIRS8 * goal_unit).sum(-1) - 1.5 * crowd - 2.0 * off_pitch
+                     + n[:8, 2] * (1.0 - d) * 0.8)
+    dribble_dir = (jnp.argmax(dribble_score) + 1).astype(jnp.int32)
+
+    mate_delta = own - me
+    mate_dist = jnp.linalg.norm(mate_delta, axis=1)
+    blockers = _lane_blockers(me, own, opp, 0.03)
+    mark = own[:, None] - opp[None]
+    openness = jnp.sqrt(jnp.min(mark[..., 0] ** 2 + mark[..., 1] ** 2, axis=1))
+    pass_score = (0.8 * mate_delta[:, 0] + 1.5 * jnp.minimum(openness, 0.12) - 0.5 * blockers
+                  - 0.6 * jnp.maximum(mate_dist - 0.6, 0.0) - 0.3 * _IS_GK
+                  - 10.0 * is_carrier - 10.0 * (mate_dist < 0.08) + n[:, 1] * (1.0 - d) * 0.5)
+    mate = jnp.argmax(pass_score)
+    opp_rel = opp - me
+    opp_dist = jnp.linalg.norm(opp_rel, axis=1)
+    ahead = (opp_rel * goal_unit).sum(-1) > -0.01
+    pressed = jnp.any((opp_dist < 0.06) & ahead) | jnp.any(opp_dist < 0.035)
+    in_restart = state.game_mode != C.NORMAL
+    shoot_range = 0.28 + (1.0 - d) * 0.3 * u[c, 5]
+    shoot = (dist_goal < shoot_range) & (jnp.abs(me[1]) < 0.3)
+    switch_play = (u[c, 7] < 0.02) & (pass_score[mate] > 0.3)
+    do_pass = ~shoot & ((pressed & (pass_score[mate] > -0.3)) | switch_play | in_restart)
+    pass_kind = jnp.where(blockers[mate] > 0, C.HIGH_PASS,
+                          jnp.where(mate_dist[mate] < 0.35, C.SHORT_PASS, C.LONG_PASS))
+    carrier_kick = jnp.where(shoot, C.SHOT, jnp.where(do_pass, pass_kind, 0))
+    carrier_dir = jnp.where(do_pass, quantize_direction(mate_delta[mate]), dribble_dir)
+    carrier_sprint = ~jnp.any((opp_dist < 0.05) & ahead)
+    return carrier_dir, carrier_sprint, carrier_kick, pressed
+
+
+def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tuple) -> jax.Array:
+    """The AI's actions i32[11] (absolute directions) for the team ``view`` describes.
+
+    ``plan`` is ``carrier_plan`` for this team (ignored when it has no carrier).
+    """
+    d = jnp.clip(jnp.asarray(difficulty, jnp.float32), 0.0, 1.0)
+    team = view.team
     sign = team_sign(team)
-    own = state.pos.reshape(2, C.NUM_PLAYERS, 2)[team] * sign
-    opp = state.pos.reshape(2, C.NUM_PLAYERS, 2)[1 - team] * sign
-    facing = state.facing.reshape(2, C.NUM_PLAYERS, 2)[team] * sign
-    u = noise.uniform.reshape(2, C.NUM_PLAYERS, C.NUM_UNIFORM)[team]
-    n = noise.normal.reshape(2, C.NUM_PLAYERS, C.NUM_NORMAL)[team]
-    cur_dir = state.sticky_dir.reshape(2, C.NUM_PLAYERS)[team]
-    cur_dir = jnp.where(team == 1, mirror_action(cur_dir), cur_dir)
-    cur_sprint = state.sprint.reshape(2, C.NUM_PLAYERS)[team]
-    cur_dribble = state.dribble.reshape(2, C.NUM_PLAYERS)[team]
-    prev = state.ai_prev.reshape(2, C.NUM_PLAYERS)[team]
-    prev = jnp.where(team == 1, mirror_action(prev), prev)
+    own, opp, facing, u, n = view.own, view.opp, view.facing, view.uniform, view.normal
+    cur_dir, cur_sprint, cur_dribble, prev = view.cur_dir, view.cur_sprint, view.cur_dribble, view.prev
 
     ball = state.ball_pos[:2] * sign
     ball_vel = state.ball_vel[:2] * sign
@@ -113,42 +213,7 @@ def team_actions(state: FootballState, team: jax.Array, difficulty: jax.Array, n
     facing_ball = jnp.sum(facing * (ball - own), axis=1) > 0.7 * d_ball
     slide = chase & they_have & (d_ball < 0.035) & facing_ball & (u[:, 6] < 0.08 * d)
 
-    # ---- the carrier: shoot, pass or dribble --------------------------------------
-    c = jnp.maximum(carrier, 0)
-    me = own[c]
-    to_goal = jnp.array([1.0, 0.0]) - me
-    dist_goal = jnp.linalg.norm(to_goal)
-    goal_unit = to_goal / (dist_goal + 1e-9)
-    probe = me + 0.08 * _DIRS8                                     # [8, 2]
-    crowd = jnp.sum(jnp.exp(-jnp.sum((probe[:, None] - opp[None]) ** 2, -1) / (2 * 0.04**2)), 1)
-    off_pitch = (jnp.abs(probe[:, 1]) > 0.39) | (probe[:, 0] > 0.97) | (probe[:, 0] < -0.97)
-    dribble_score = (_DIRS8 @ goal_unit - 1.5 * crowd - 2.0 * off_pitch
-                     + n[:8, 2] * (1.0 - d) * 0.8)
-    dribble_dir = (jnp.argmax(dribble_score) + 1).astype(jnp.int32)
-
-    mate_delta = own - me
-    mate_dist = jnp.linalg.norm(mate_delta, axis=1)
-    blockers = _lane_blockers(me, own, opp, 0.03)
-    openness = jnp.min(jnp.linalg.norm(own[:, None] - opp[None], axis=-1), axis=1)
-    pass_score = (0.8 * mate_delta[:, 0] + 1.5 * jnp.minimum(openness, 0.12) - 0.5 * blockers
-                  - 0.6 * jnp.maximum(mate_dist - 0.6, 0.0) - 0.3 * _IS_GK
-                  - 10.0 * is_carrier - 10.0 * (mate_dist < 0.08) + n[:, 1] * (1.0 - d) * 0.5)
-    mate = jnp.argmax(pass_score)
-    opp_rel = opp - me
-    opp_dist = jnp.linalg.norm(opp_rel, axis=1)
-    ahead = opp_rel @ goal_unit > -0.01
-    pressed = jnp.any((opp_dist < 0.06) & ahead) | jnp.any(opp_dist < 0.035)
-    in_restart = state.game_mode != C.NORMAL
-    shoot_range = 0.28 + (1.0 - d) * 0.3 * u[c, 5]
-    shoot = (dist_goal < shoot_range) & (jnp.abs(me[1]) < 0.3)
-    switch_play = (u[c, 7] < 0.02) & (pass_score[mate] > 0.3)
-    do_pass = ~shoot & ((pressed & (pass_score[mate] > -0.3)) | switch_play | in_restart)
-    pass_kind = jnp.where(blockers[mate] > 0, C.HIGH_PASS,
-                          jnp.where(mate_dist[mate] < 0.35, C.SHORT_PASS, C.LONG_PASS))
-    carrier_kick = jnp.where(shoot, C.SHOT, jnp.where(do_pass, pass_kind, 0))
-    carrier_dir = jnp.where(do_pass, quantize_direction(mate_delta[mate]), dribble_dir)
-    carrier_sprint = ~jnp.any((opp_dist < 0.05) & ahead)
-
+    carrier_dir, carrier_sprint, carrier_kick, pressed = plan
     desired_dir = jnp.where(is_carrier, carrier_dir, move_dir)
     want_sprint = jnp.where(is_carrier, carrier_sprint, want_sprint)
     want_dribble = is_carrier & pressed
@@ -175,8 +240,13 @@ def team_actions(state: FootballState, team: jax.Array, difficulty: jax.Array, n
 
 def all_actions(state: FootballState, difficulties: jax.Array, noise: Noise) -> jax.Array:
     """Built-in AI actions i32[22] for both teams; ``difficulties`` is f32[2] (left, right)."""
-    per_team = jax.vmap(team_actions, in_axes=(None, 0, 0, None))(
-        state, jnp.arange(2), jnp.asarray(difficulties, jnp.float32), noise)
+    views = jax.tree.map(lambda a, b: jnp.stack([a, b]), team_view(state, noise, 0),
+                         team_view(state, noise, 1))
+    difficulties = jnp.asarray(difficulties, jnp.float32)
+    carrier_team = jnp.maximum(player_team(state.owner), 0)
+    carrier_view = jax.tree.map(lambda v: v[carrier_team], views)
+    plan = carrier_plan(state, carrier_view, difficulties[carrier_team])
+    per_team = jax.vmap(decide, in_axes=(None, 0, 0, None))(state, views, difficulties, plan)
     return per_team.reshape(C.NUM_TOTAL)
 
 

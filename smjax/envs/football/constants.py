@@ -132,4 +132,4 @@ CHECKPOINT_THRESHOLDS = np.array([0.99 - 0.8 * k / 9 for k in range(NUM_CHECKPOI
 
 # ---- random draws per tick (see state.Noise) --------------------------------
 NUM_UNIFORM = 8
-NUM_NORMAL = 4
+NUM_NORMAL = 3

@@ -81,7 +81,7 @@ def pass_target(state: FootballState, kicker: jax.Array) -> jax.Array:
     mates = jnp.arange(C.NUM_PLAYERS) + C.NUM_PLAYERS * team
     delta = state.pos[mates] - state.pos[kicker]
     dist = jnp.linalg.norm(delta, axis=1) + 1e-6
-    cos = (delta @ aim) / dist
+    cos = (delta * aim).sum(-1) / dist
     # Within 60 degrees of the aim a near teammate beats a far one; outside it only as
     # a last resort (then the best aligned of all).
     score = cos - 0.4 * dist - 10.0 * (cos < 0.5) - 100.0 * (mates == kicker)
@@ -154,6 +154,6 @@ def ball_flight(ball_pos: jax.Array, ball_vel: jax.Array) -> tuple[jax.Array, ja
 def segment_distance(points: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
     """Distance from each point f32[N, 2] to the segment a-b (the ball's path this step)."""
     ab = b - a
-    t = jnp.clip(((points - a) @ ab) / (ab @ ab + 1e-12), 0.0, 1.0)
+    t = jnp.clip(((points - a) * ab).sum(-1) / ((ab * ab).sum() + 1e-12), 0.0, 1.0)
     closest = a + t[:, None] * ab
     return jnp.linalg.norm(points - closest, axis=1)

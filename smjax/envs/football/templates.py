@@ -95,13 +95,13 @@ def possession_actions(state: FootballState) -> jax.Array:
     me = state.pos[c]
     own, opp = state.pos[:_N], state.pos[_N:]
     rel = opp - me
-    along = rel @ _DIRS8.T                                        # [11 opp, 8 dirs]
+    along = (rel[:, None, :] * _DIRS8[None]).sum(-1)            # [11 opp, 8 dirs]
     across = jnp.sqrt(jnp.maximum(jnp.sum(rel * rel, 1)[:, None] - along**2, 0.0))
     blocked = jnp.any((along > 0.0) & (along < 0.2) & (across < along * 0.577), axis=0)
     probe = me + 0.1 * _DIRS8
     on_pitch = (jnp.abs(probe[:, 1]) < 0.4) & (jnp.abs(probe[:, 0]) < 0.98)
     goal_unit = (GOAL - me) / (jnp.linalg.norm(GOAL - me) + 1e-9)
-    gain = _DIRS8 @ goal_unit
+    gain = (_DIRS8 * goal_unit).sum(-1)
     free = ~blocked & on_pitch & (gain > -0.1)
     best_free = (jnp.argmax(jnp.where(free, gain, -10.0)) + 1).astype(jnp.int32)
 
