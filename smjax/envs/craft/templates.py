@@ -14,6 +14,7 @@ from typing import Callable
 import jax
 import jax.numpy as jnp
 
+from smjax.core.sampling import choose_uniform
 from smjax.envs.craft import constants as C
 from smjax.envs.craft.structs import CraftParams, CraftState
 from smjax.options import Hierarchy, OptionTemplate, declare
@@ -39,12 +40,7 @@ def _teleport_fn(item: str) -> Callable:
 
     def teleport(key: jax.Array, state: CraftState, params: CraftParams):
         cand = stand_candidates(state.grid, target_kind).reshape(-1)
-        count = jnp.sum(cand, dtype=jnp.int32)
-        pick = jnp.minimum(
-            (jax.random.uniform(key) * count.astype(jnp.float32)).astype(jnp.int32),
-            jnp.maximum(count - 1, 0),
-        )
-        index = jnp.argmax(jnp.cumsum(cand, dtype=jnp.int32) > pick)
+        index, count = choose_uniform(key, cand)
         direction, cell = index // (N * N), index % (N * N)
         possible = count > 0
         inventory = state.inventory
