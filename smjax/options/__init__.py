@@ -3,9 +3,9 @@
 Nothing in this package imports an environment module.
 """
 from smjax.options.hierarchy import ALL_PRIMITIVES, Hierarchy, HierarchyError, declare
-from smjax.options.template import OptionTemplate, always, teleport_step
+from smjax.options.template import OptionTemplate, Parametric, always, teleport_step
 
 __all__ = [
-    "OptionTemplate", "always", "teleport_step", "Hierarchy", "HierarchyError", "declare",
+    "OptionTemplate", "Parametric", "always", "teleport_step", "Hierarchy", "HierarchyError", "declare",
     "ALL_PRIMITIVES",
 ]

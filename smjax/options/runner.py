@@ -27,6 +27,7 @@ from flax import struct
 from smjax.agents.base import Transition
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
+from smjax.options.template import Parametric
 from smjax.options.stack import (
     ExecutionStack, stack_contains, stack_init, stack_push, stack_tick, stack_top, stack_truncate,
 )
@@ -118,6 +119,8 @@ class HierarchyRunner:
         space = env.action_space(env_params)
         self.action_shape = tuple(space.shape)
         self.action_dtype = space.dtype
+        self.teleport_families = _families([t.teleport for t in tpls])
+        self.controller_families = _families([t.controller for t in tpls])
 
     # ---- per-environment template evaluations (unbatched) ------------------
     def _satisfied(self, state) -> jax.Array:
@@ -127,16 +130,6 @@ class HierarchyRunner:
     def _initiation(self, state) -> jax.Array:
         vals = [jnp.asarray(True)] + [t.initiation(state, self.env_params) for t in self.templates]
         return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
-
-    def _controller_actions(self, key, state) -> jax.Array:
-        zero = jnp.zeros(self.action_shape, self.action_dtype)
-        keys = jax.random.split(key, len(self.templates) + 1)
-        acts = [zero] + [
-            jnp.asarray(t.controller(k, state, self.env_params), self.action_dtype).reshape(self.action_shape)
-            if t.controller is not None else zero
-            for k, t in zip(keys[1:], self.templates)
-        ]
-        return jnp.stack(acts)
 
     def callable_options(self, learned: jax.Array, learner: jax.Array) -> jax.Array:
         """bool [num_options]: options that can run now (learned, the learner, or realisable)."""
@@ -217,19 +210,17 @@ class HierarchyRunner:
             lambda s, f, l: self._decide(s, f, l, controls, callable_)
         )(carry.stack, frozen, act.action)
 
-        ctrl = jax.vmap(self._controller_actions)(jax.random.split(k_ctrl, B), carry.env_state)
-        prim_action = jnp.broadcast_to(
+        action = jnp.broadcast_to(
             primitive.reshape((B,) + (1,) * len(self.action_shape)), (B,) + self.action_shape
         ).astype(self.action_dtype)
-        scripted_action = jnp.take_along_axis(
-            ctrl, jnp.maximum(scripted, 0).reshape((B, 1) + (1,) * len(self.action_shape)), 1
-        )[:, 0]
-        is_scripted = (scripted >= 0).reshape((B,) + (1,) * len(self.action_shape))
-        action = jnp.where(is_scripted, scripted_action, prim_action)
+        if self.controller_families:
+            action = self._run_family(self.controller_families, k_ctrl, carry.env_state, scripted,
+                                      action, controls=True)
 
         state_in = carry.env_state
-        if self.allow_teleport and self.has_teleport.any():
-            state_in, action = self._apply_teleports(k_tp, state_in, action, teleported)
+        if self.allow_teleport and self.teleport_families:
+            state_in, action = self._run_family(self.teleport_families, k_tp, state_in, teleported,
+                                                action, controls=False)
 
         obs, state, reward, terminated, truncated, info = jax.vmap(
             self.env.step_env, (0, 0, 0, None)
@@ -292,16 +283,73 @@ class HierarchyRunner:
         )
         return new_carry, transition, ends
 
-    def _apply_teleports(self, key, state, action, teleported):
-        B = teleported.shape[0]
-        keys = jax.random.split(key, len(self.templates))
-        for j, (tpl, k) in enumerate(zip(self.templates, keys), start=1):
-            if tpl.teleport is None:
-                continue
-            jumped, tp_action = jax.vmap(tpl.teleport, (0, 0, None))(
-                jax.random.split(k, B), state, self.env_params)
-            hit = teleported == j
-            state = jax.vmap(select_tree)(hit, jumped, state)
-            tp_action = jnp.asarray(tp_action, self.action_dtype).reshape(action.shape)
-            action = jnp.where(hit.reshape((B,) + (1,) * (action.ndim - 1)), tp_action, action)
-        return state, action
+    def _run_family(self, families, key, state, chosen, action, *, controls: bool):
+        """Realise the template ``chosen[b]`` (option id, -1 for none) of each environment.
+
+        One vmapped call per family: a family's data is gathered per environment for the
+        member it runs. Controllers return an action; teleports a (state, action) pair.
+        """
+        B = chosen.shape[0]
+        safe = jnp.maximum(chosen, 0)
+        for i, fam in enumerate(families):
+            keys = jax.random.split(jax.random.fold_in(key, i), B)
+            member = jnp.asarray(fam.member_of)[safe]
+            hit = (chosen >= 0) & jnp.asarray(fam.is_member)[safe]
+            data = jax.tree.map(lambda d: jnp.asarray(d)[member], fam.data)
+            out = jax.vmap(fam.fn, (0, 0, None, 0))(keys, state, self.env_params, data)
+            if controls:
+                new_action = out
+            else:
+                jumped, new_action = out
+                state = jax.vmap(select_tree)(hit, jumped, state)
+            new_action = jnp.asarray(new_action, self.action_dtype).reshape(action.shape)
+            action = jnp.where(hit.reshape((B,) + (1,) * (action.ndim - 1)), new_action, action)
+        return action if controls else (state, action)
+
+
+@dataclass(frozen=True)
+class _Family:
+    fn: Any
+    data: Any             # stacked member data, leading axis = member
+    member_of: np.ndarray  # [num_options] -> member index (0 where not a member)
+    is_member: np.ndarray  # [num_options] bool
+
+
+def _families(realisations) -> list[_Family]:
+    """Group templates' teleports (or controllers) into families sharing one function.
+
+    ``Parametric`` realisations with the same ``fn`` form one family; any other callable
+    is a family of one (with no data). Option ids are template index + 1 (0 is the root).
+    """
+    groups: dict[int, list] = {}
+    order: list[int] = []
+    for j, real in enumerate(realisations, start=1):
+        if real is None:
+            continue
+        fn = real.fn if isinstance(real, Parametric) else real
+        if id(fn) not in groups:
+            groups[id(fn)] = []
+            order.append(id(fn))
+        groups[id(fn)].append((j, real))
+    out = []
+    n = len(realisations) + 1
+    for gid in order:
+        members = groups[gid]
+        first = members[0][1]
+        member_of, is_member = np.zeros(n, np.int32), np.zeros(n, bool)
+        for m, (j, _) in enumerate(members):
+            member_of[j], is_member[j] = m, True
+        if isinstance(first, Parametric):
+            data = jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs]),
+                                *[r.data for _, r in members])
+            fn = first.fn
+        else:
+            data, fn = np.zeros((1,), np.int32), _drop_data(first)
+        out.append(_Family(fn, data, member_of, is_member))
+    return out
+
+
+def _drop_data(fn):
+    def call(key, state, params, _data):
+        return fn(key, state, params)
+    return call

@@ -27,6 +27,26 @@ TeleportFn = Callable[[jax.Array, Any, Any], tuple[Any, jax.Array]]
 ControllerFn = Callable[[jax.Array, Any, Any], jax.Array]
 
 
+@dataclass(frozen=True, eq=False)
+class Parametric:
+    """A realisation shared by a family of templates, each with its own data.
+
+    ``Parametric(fn, data)(key, state, params) == fn(key, state, params, data)``. Use it
+    for a teleport or controller that differs between templates only by data (Craft's
+    "give X" for each X, Fetch's "reach block i" for each i): the runner then evaluates
+    one call per family per tick, with each environment's data gathered for the
+    template it runs, instead of one call per template (under ``vmap`` every call runs
+    for every environment). ``data`` is a pytree of arrays with the same structure for
+    every member of a family.
+    """
+
+    fn: Callable[..., Any]
+    data: Any
+
+    def __call__(self, key: jax.Array, state: Any, params: Any):
+        return self.fn(key, state, params, self.data)
+
+
 def always(state: Any, params: Any) -> jax.Array:
     """Initiation set that holds everywhere."""
     return jnp.asarray(True)

@@ -13,11 +13,12 @@ from typing import Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.core.sampling import choose_uniform
 from smjax.envs.craft import constants as C
 from smjax.envs.craft.structs import CraftParams, CraftState
-from smjax.options import Hierarchy, OptionTemplate, declare
+from smjax.options import Hierarchy, OptionTemplate, Parametric, declare
 
 N = C.GRID_SIZE
 
@@ -33,28 +34,34 @@ def stand_candidates(grid: jax.Array, target_kind: int) -> jax.Array:
     return jnp.stack(facing) & empty[None]
 
 
-def _teleport_fn(item: str) -> Callable:
+def give_teleport(key: jax.Array, state: CraftState, params: CraftParams, data: dict):
+    """The teleport of every ``give_X``; ``data`` says which X (see ``teleport_data``).
+
+    One function for the whole family (``Parametric``), so a batch in which different
+    environments call different give_X templates evaluates it once, not once per X.
+    """
+    cand = stand_candidates(state.grid, data["target_kind"]).reshape(-1)
+    index, count = choose_uniform(key, cand)
+    direction, cell = index // (N * N), index % (N * N)
+    possible = count > 0
+    add = (possible & data["crafted"]).astype(state.inventory.dtype)
+    jumped = state.replace(
+        pos=jnp.where(possible, jnp.stack([cell // N, cell % N]), state.pos).astype(jnp.int32),
+        direction=jnp.where(possible, direction, state.direction).astype(jnp.int32),
+        inventory=state.inventory.at[data["item_id"]].add(add),
+    )
+    action = jnp.where(possible, C.USE, C.NOOP).astype(jnp.int32)
+    return jumped, action
+
+
+def teleport_data(item: str) -> dict:
+    """Per-item data of ``give_teleport``: the item, the kind to stand next to, crafted?"""
     item_id = C.KIND_ID[item]
-    target_kind = C.WORKSHOP_OF.get(item, item_id)
-    crafted = item in C.CRAFTED
-
-    def teleport(key: jax.Array, state: CraftState, params: CraftParams):
-        cand = stand_candidates(state.grid, target_kind).reshape(-1)
-        index, count = choose_uniform(key, cand)
-        direction, cell = index // (N * N), index % (N * N)
-        possible = count > 0
-        inventory = state.inventory
-        if crafted:
-            inventory = inventory.at[item_id].add(possible.astype(inventory.dtype))
-        jumped = state.replace(
-            pos=jnp.where(possible, jnp.stack([cell // N, cell % N]), state.pos).astype(jnp.int32),
-            direction=jnp.where(possible, direction, state.direction).astype(jnp.int32),
-            inventory=inventory,
-        )
-        action = jnp.where(possible, C.USE, C.NOOP).astype(jnp.int32)
-        return jumped, action
-
-    return teleport
+    return {
+        "item_id": np.int32(item_id),
+        "target_kind": np.uint8(C.WORKSHOP_OF.get(item, item_id)),
+        "crafted": np.bool_(item in C.CRAFTED),
+    }
 
 
 def _held_fn(item_id: int, held: bool) -> Callable:
@@ -75,7 +82,7 @@ def make_templates() -> dict[str, OptionTemplate]:
             satisfied=_held_fn(item_id, True),
             initiation=_held_fn(item_id, False),
             k_max=C.STEP_CAP[item],
-            teleport=_teleport_fn(item),
+            teleport=Parametric(give_teleport, teleport_data(item)),
             nominal_steps=C.NOMINAL_STEPS[item],
             description=f"obtain one {item} {how}".strip(),
         )
