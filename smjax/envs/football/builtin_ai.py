@@ -29,7 +29,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from smjax.envs.football import constants as C
-from smjax.envs.football.physics import DIRS
+from smjax.envs.football.physics import DIRS, dot2, min_axis, norm2, sum_axis
 from smjax.envs.football.state import FootballState, Noise, draw_noise, mirror_action, player_team, team_sign
 
 _DIRS8 = DIRS[1:]
@@ -61,7 +61,7 @@ def _lane_blockers(start: jax.Array, ends: jax.Array, opp: jax.Array, width: flo
     ao = opp - start                                              # [11, 2]
     # Elementwise products, not matmuls: tiny batched dots are slow on CPU under vmap.
     proj = ab[:, None, 0] * ao[None, :, 0] + ab[:, None, 1] * ao[None, :, 1]
-    t = jnp.clip(proj / (jnp.sum(ab * ab, axis=1, keepdims=True) + 1e-9), 0.0, 1.0)
+    t = jnp.clip(proj / (dot2(ab, ab)[:, None] + 1e-9), 0.0, 1.0)
     gap = start + t[..., None] * ab[:, None, :] - opp[None]       # [11 mates, 11 opp, 2]
     d2 = gap[..., 0] ** 2 + gap[..., 1] ** 2
     return jnp.sum((d2 < width * width) & (t > 0.05), axis=1)
@@ -115,43 +115,50 @@ def carrier_plan(state: FootballState, view: TeamView, difficulty: jax.Array) ->
     own, opp, u, n = view.own, view.opp, view.uniform, view.normal
     carrier = jnp.where(player_team(state.owner) == team, state.owner - C.NUM_PLAYERS * team, -1)
     is_carrier = jnp.arange(C.NUM_PLAYERS) == carrier
-    c = jnp.maximum(carrier, 0)
-    me = own[c]
+    # One-hot picks instead of gathers: under vmap a gather per env costs more than
+    # an 11-element masked sum.
+    pick_c = jnp.where(carrier >= 0, is_carrier, jnp.arange(C.NUM_PLAYERS) == 0)
+    me = sum_axis(jnp.where(pick_c[:, None], own, 0.0), 0)
     to_goal = jnp.array([1.0, 0.0]) - me
-    dist_goal = jnp.linalg.norm(to_goal)
+    dist_goal = norm2(to_goal)
     goal_unit = to_goal / (dist_goal + 1e-9)
     probe = me + 0.08 * _DIRS8                                     # [8, 2]
     # Crowding of each probe point: a polynomial bump of radius 0.08 per opponent
     # (cheaper than a Gaussian and just as smooth where it matters).
     gap = probe[:, None] - opp[None]
-    crowd = jnp.sum(jnp.maximum(1.0 - (gap[..., 0] ** 2 + gap[..., 1] ** 2) / 0.08**2, 0.0) ** 2, 1)
+    crowd = sum_axis(jnp.maximum(1.0 - (gap[..., 0] ** 2 + gap[..., 1] ** 2) / 0.08**2, 0.0) ** 2, 1)
     off_pitch = (jnp.abs(probe[:, 1]) > 0.39) | (probe[:, 0] > 0.97) | (probe[:, 0] < -0.97)
-    dribble_score = ((_DIRS8 * goal_unit).sum(-1) - 1.5 * crowd - 2.0 * off_pitch
+    dribble_score = (dot2(_DIRS8, goal_unit) - 1.5 * crowd - 2.0 * off_pitch
                      + n[:8, 2] * (1.0 - d) * 0.8)
     dribble_dir = (jnp.argmax(dribble_score) + 1).astype(jnp.int32)
 
     mate_delta = own - me
-    mate_dist = jnp.linalg.norm(mate_delta, axis=1)
+    mate_dist = norm2(mate_delta)
     blockers = _lane_blockers(me, own, opp, 0.03)
     mark = own[:, None] - opp[None]
-    openness = jnp.sqrt(jnp.min(mark[..., 0] ** 2 + mark[..., 1] ** 2, axis=1))
+    openness = jnp.sqrt(min_axis(mark[..., 0] ** 2 + mark[..., 1] ** 2, 1))
     pass_score = (0.8 * mate_delta[:, 0] + 1.5 * jnp.minimum(openness, 0.12) - 0.5 * blockers
                   - 0.6 * jnp.maximum(mate_dist - 0.6, 0.0) - 0.3 * _IS_GK
                   - 10.0 * is_carrier - 10.0 * (mate_dist < 0.08) + n[:, 1] * (1.0 - d) * 0.5)
-    mate = jnp.argmax(pass_score)
+    best_pass = -min_axis(-pass_score, 0)
+    pick_m = jnp.arange(C.NUM_PLAYERS) == jnp.argmax(pass_score)
     opp_rel = opp - me
-    opp_dist = jnp.linalg.norm(opp_rel, axis=1)
-    ahead = (opp_rel * goal_unit).sum(-1) > -0.01
+    opp_dist = norm2(opp_rel)
+    ahead = dot2(opp_rel, goal_unit) > -0.01
     pressed = jnp.any((opp_dist < 0.06) & ahead) | jnp.any(opp_dist < 0.035)
     in_restart = state.game_mode != C.NORMAL
-    shoot_range = 0.28 + (1.0 - d) * 0.3 * u[c, 5]
+    u_c = sum_axis(jnp.where(pick_c[:, None], u, 0.0), 0)
+    shoot_range = 0.28 + (1.0 - d) * 0.3 * u_c[5]
     shoot = (dist_goal < shoot_range) & (jnp.abs(me[1]) < 0.3)
-    switch_play = (u[c, 7] < 0.02) & (pass_score[mate] > 0.3)
-    do_pass = ~shoot & ((pressed & (pass_score[mate] > -0.3)) | switch_play | in_restart)
-    pass_kind = jnp.where(blockers[mate] > 0, C.HIGH_PASS,
-                          jnp.where(mate_dist[mate] < 0.35, C.SHORT_PASS, C.LONG_PASS))
+    switch_play = (u_c[7] < 0.02) & (best_pass > 0.3)
+    do_pass = ~shoot & ((pressed & (best_pass > -0.3)) | switch_play | in_restart)
+    lane_blocked = jnp.any(pick_m & (blockers > 0))
+    pass_dist = sum_axis(jnp.where(pick_m, mate_dist, 0.0), 0)
+    pass_delta = sum_axis(jnp.where(pick_m[:, None], mate_delta, 0.0), 0)
+    pass_kind = jnp.where(lane_blocked, C.HIGH_PASS,
+                          jnp.where(pass_dist < 0.35, C.SHORT_PASS, C.LONG_PASS))
     carrier_kick = jnp.where(shoot, C.SHOT, jnp.where(do_pass, pass_kind, 0))
-    carrier_dir = jnp.where(do_pass, quantize_direction(mate_delta[mate]), dribble_dir)
+    carrier_dir = jnp.where(do_pass, quantize_direction(pass_delta), dribble_dir)
     carrier_sprint = ~jnp.any((opp_dist < 0.05) & ahead)
     return carrier_dir, carrier_sprint, carrier_kick, pressed
 
@@ -196,7 +203,7 @@ def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tu
     ], axis=1)
     gk_home = jnp.stack([-0.97, jnp.clip(ball[1] * 0.3, -0.035, 0.035)])
     anchor = anchor.at[C.GOALKEEPER].set(gk_home)
-    d_ball = jnp.linalg.norm(own - ball, axis=1)
+    d_ball = norm2(own - ball)
     d_field = jnp.where(_IS_GK, 1e9, d_ball)
     rank = jnp.sum(d_field[None, :] < d_field[:, None], axis=1)
     n_press = jnp.where(they_have, 1 + jnp.floor(2.99 * d), jnp.where(loose, 1.0, 0.0))
@@ -207,10 +214,10 @@ def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tu
     chase_target = jnp.where(loose, ball_ahead, ball)
     target = jnp.where(chase[:, None], chase_target, anchor)
     to_target = target - own
-    dist_target = jnp.linalg.norm(to_target, axis=1)
+    dist_target = norm2(to_target)
     move_dir = jnp.where(dist_target > 0.01, quantize_direction(to_target), 0)
     want_sprint = (dist_target > 0.08) | chase
-    facing_ball = jnp.sum(facing * (ball - own), axis=1) > 0.7 * d_ball
+    facing_ball = dot2(facing, ball - own) > 0.7 * d_ball
     slide = chase & they_have & (d_ball < 0.035) & facing_ball & (u[:, 6] < 0.08 * d)
 
     carrier_dir, carrier_sprint, carrier_kick, pressed = plan

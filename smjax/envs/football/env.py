@@ -21,6 +21,7 @@ from smjax.core import spaces
 from smjax.core.env import Environment
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import all_actions
+from smjax.envs.football.physics import dot2, norm2
 from smjax.envs.football.observation import OBSERVATION_SIZES, observe
 from smjax.envs.football.rules import step_game
 from smjax.envs.football.state import FootballParams, FootballState, draw_noise, initial_state
@@ -69,7 +70,7 @@ class FootballEnv(Environment[FootballState, FootballParams]):
         new = new.replace(step=state.step + 1)
 
         # Checkpoint shaping: thresholds reached while the left team holds the ball.
-        dist = jnp.linalg.norm(new.ball_pos[:2] - jnp.array([1.0, 0.0]))
+        dist = norm2(new.ball_pos[:2] - jnp.array([1.0, 0.0]))
         reached = jnp.sum(dist < jnp.asarray(C.CHECKPOINT_THRESHOLDS)).astype(jnp.int32)
         left_has = (new.owner >= 0) & (new.owner < C.NUM_PLAYERS)
         paid = jnp.where(left_has, jnp.maximum(state.checkpoints, reached), state.checkpoints)

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.envs.football import constants as C
+from smjax.envs.football.physics import dot2, norm2
 from smjax.envs.football.state import FootballState, player_team
 
 OBSERVATION_SIZES = {"simple115": 115, "paper": 139}
@@ -40,7 +41,7 @@ def _owner_team_onehot(state: FootballState) -> jax.Array:
 
 def active_player(state: FootballState) -> jax.Array:
     """The left player the observation marks: our carrier, else our nearest to the ball."""
-    dist = jnp.linalg.norm(state.pos[: C.NUM_PLAYERS] - state.ball_pos[:2], axis=1)
+    dist = norm2(state.pos[: C.NUM_PLAYERS] - state.ball_pos[:2])
     nearest = jnp.argmin(dist)
     return jnp.where((state.owner >= 0) & (state.owner < C.NUM_PLAYERS), state.owner, nearest)
 

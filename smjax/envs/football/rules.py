@@ -37,6 +37,7 @@ import jax.numpy as jnp
 from smjax.core.env import select_tree
 from smjax.envs.football import constants as C
 from smjax.envs.football import physics
+from smjax.envs.football.physics import dot2, norm2
 from smjax.envs.football.state import FootballState, Noise, kickoff, player_team, team_sign
 
 _IDX = jnp.arange(C.NUM_TOTAL)
@@ -54,7 +55,7 @@ def in_own_penalty_area(pos: jax.Array, team: jax.Array) -> jax.Array:
 def _push_out(pos: jax.Array, centre: jax.Array, mask: jax.Array, radius: float, fallback: jax.Array):
     """Move masked players closer than ``radius`` to ``centre`` onto that circle."""
     delta = pos - centre
-    dist = jnp.linalg.norm(delta, axis=1)
+    dist = norm2(delta)
     unit = jnp.where(dist[:, None] > 1e-6, delta / (dist[:, None] + 1e-9), fallback)
     pushed = centre + unit * radius
     return jnp.where((mask & (dist < radius))[:, None], pushed, pos)
@@ -65,10 +66,10 @@ def apply_restart(state: FootballState, mode: jax.Array, team: jax.Array, spot: 
     sign = team_sign(team)
     mine = _TEAM_OF == team
     may_take = jnp.where(mode == C.GOAL_KICK, mine & _IS_GK, mine & ~_IS_GK)
-    dist = jnp.linalg.norm(state.pos - spot, axis=1)
+    dist = norm2(state.pos - spot)
     taker = jnp.argmin(jnp.where(may_take, dist, _INF)).astype(jnp.int32)
     look_at = jnp.where(mode == C.PENALTY, jnp.stack([sign, 0.0]), jnp.stack([sign * 0.5, 0.0]))
-    facing = (look_at - spot) / (jnp.linalg.norm(look_at - spot) + 1e-9)
+    facing = (look_at - spot) / (norm2(look_at - spot) + 1e-9)
     pos = state.pos.at[taker].set(spot - facing * C.BALL_OFFSET)
     pos = _push_out(pos, spot, ~mine, C.RESTART_CLEARANCE, -facing)
     keeper = C.NUM_PLAYERS * (1 - team) + C.GOALKEEPER
@@ -114,7 +115,7 @@ def _tackles(state: FootballState, sliding_now: jax.Array, in_restart: jax.Array
     owner = jnp.maximum(state.owner, 0)
     carried = (state.owner >= 0) & ~in_restart
     opponent = _TEAM_OF != player_team(owner)
-    dist = jnp.linalg.norm(state.pos - state.ball_pos[:2], axis=1)
+    dist = norm2(state.pos - state.ball_pos[:2])
     able = (state.cooldown == 0) & ((state.stun == 0) | sliding_now)
     standing = carried & opponent & able & ~sliding_now & (dist < C.TACKLE_RADIUS)
     slider = carried & opponent & able & sliding_now & (dist < C.SLIDE_RADIUS)
@@ -139,7 +140,7 @@ def _control(state: FootballState, prev_ball: jax.Array, noise: Noise) -> Footba
     keeper_hands = _IS_GK & in_own_penalty_area(state.pos, _TEAM_OF)
     radius = jnp.where(keeper_hands, C.GK_CONTROL_RADIUS, C.CONTROL_RADIUS)
     height = jnp.where(keeper_hands, C.GK_CONTROL_HEIGHT, C.CONTROL_HEIGHT)
-    speed = jnp.linalg.norm(state.ball_vel[:2])
+    speed = norm2(state.ball_vel[:2])
     p_control = jnp.where(keeper_hands, jnp.clip(1.3 - 12.0 * speed, 0.35, 1.0),
                           jnp.clip(1.4 - 16.0 * speed, 0.25, 1.0))
     able = (state.cooldown == 0) & (state.stun == 0)

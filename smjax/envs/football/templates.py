@@ -32,7 +32,7 @@ import jax.numpy as jnp
 
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import _lane_blockers, quantize_direction
-from smjax.envs.football.physics import DIRS
+from smjax.envs.football.physics import DIRS, dot2, norm2
 from smjax.envs.football.state import FootballState
 from smjax.options import OptionTemplate, declare
 
@@ -95,18 +95,18 @@ def possession_actions(state: FootballState) -> jax.Array:
     me = state.pos[c]
     own, opp = state.pos[:_N], state.pos[_N:]
     rel = opp - me
-    along = (rel[:, None, :] * _DIRS8[None]).sum(-1)            # [11 opp, 8 dirs]
-    across = jnp.sqrt(jnp.maximum(jnp.sum(rel * rel, 1)[:, None] - along**2, 0.0))
+    along = dot2(rel[:, None, :], _DIRS8[None])            # [11 opp, 8 dirs]
+    across = jnp.sqrt(jnp.maximum(dot2(rel, rel)[:, None] - along**2, 0.0))
     blocked = jnp.any((along > 0.0) & (along < 0.2) & (across < along * 0.577), axis=0)
     probe = me + 0.1 * _DIRS8
     on_pitch = (jnp.abs(probe[:, 1]) < 0.4) & (jnp.abs(probe[:, 0]) < 0.98)
-    goal_unit = (GOAL - me) / (jnp.linalg.norm(GOAL - me) + 1e-9)
-    gain = (_DIRS8 * goal_unit).sum(-1)
+    goal_unit = (GOAL - me) / (norm2(GOAL - me) + 1e-9)
+    gain = dot2(_DIRS8, goal_unit)
     free = ~blocked & on_pitch & (gain > -0.1)
     best_free = (jnp.argmax(jnp.where(free, gain, -10.0)) + 1).astype(jnp.int32)
 
     interceptors = _lane_blockers(me, own, opp, 0.04)
-    dist = jnp.linalg.norm(own - me, axis=1)
+    dist = norm2(own - me)
     mates = jnp.arange(_N)
     # Fewest interceptors first; among equals, the most forward.
     pass_score = -interceptors.astype(jnp.float32) + 0.5 * (own[:, 0] - me[0]) \
@@ -126,7 +126,7 @@ def possession_actions(state: FootballState) -> jax.Array:
     for wing, side in ((top, -1.0), (bottom, 1.0)):
         spot = jnp.stack([jnp.clip(ball[0] + 0.15, -0.9, 0.9), side * 0.3])
         delta = spot - own[wing]
-        run = jnp.where(jnp.linalg.norm(delta) > 0.02, quantize_direction(delta), C.RELEASE_DIRECTION)
+        run = jnp.where(norm2(delta) > 0.02, quantize_direction(delta), C.RELEASE_DIRECTION)
         wing_action = jnp.where(run == C.RELEASE_DIRECTION,
                                 jnp.where(state.sticky_dir[wing] > 0, C.RELEASE_DIRECTION, C.IDLE),
                                 steer(state, wing, run, jnp.bool_(True)))
@@ -140,7 +140,7 @@ def maintain_possession_controller(key: jax.Array, state: FootballState, params)
 
 def attack_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
     c = _carrier(state)
-    x, dist_goal = state.pos[c, 0], jnp.linalg.norm(state.pos[c] - GOAL)
+    x, dist_goal = state.pos[c, 0], norm2(state.pos[c] - GOAL)
     shoot = shoot_controller(key, state, params)
     charge = charge_controller(key, state, params)
     keep = possession_actions(state)
@@ -163,7 +163,7 @@ def possession_satisfied(state: FootballState, params) -> jax.Array:
 
 
 def charge_satisfied(state: FootballState, params) -> jax.Array:
-    near = jnp.linalg.norm(state.pos[_carrier(state)] - GOAL) <= 0.3
+    near = norm2(state.pos[_carrier(state)] - GOAL) <= 0.3
     return (left_controls(state) & near) | ~left_controls(state)
 
 
