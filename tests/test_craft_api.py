@@ -196,3 +196,10 @@ def test_fixed_key_gives_identical_trajectories():
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
     c = run(jax.random.PRNGKey(5))
     assert not np.array_equal(np.asarray(a[1][0]), np.asarray(c[1][0]))
+
+
+def test_bench_measures_a_tiny_run():
+    from smjax.envs.craft.bench import measure
+
+    out = measure("make_stick", "none", num_envs=2, steps=3, repeats=1)
+    assert out["num_envs"] == 2 and out["steps"] == 3 and out["steps_per_second"] > 0

@@ -62,8 +62,11 @@ def _facing(direction: jax.Array) -> jax.Array:
 def _or_reduce(words: jax.Array, axis: int) -> jax.Array:
     # A reduce (rather than chained ``|``) is a fusion root XLA materialises, so the unpack
     # below reads 50 stored words instead of recomputing the gathers and ORs for each of
-    # its 1550 output bits (measured 1.6x faster for the whole observation on CPU).
+    # its 1550 output bits (1.6x faster in a back-to-back run on the shared 2-core CPU).
     return jax.lax.reduce(words, np.uint32(0), jax.lax.bitwise_or, (axis,))
+
+
+_BIT_SHIFTS = np.arange(K, dtype=np.uint32)
 
 
 def paper_obs(state: CraftState) -> jax.Array:
@@ -80,10 +83,9 @@ def paper_obs(state: CraftState) -> jax.Array:
     blocks = _or_reduce(wy.reshape(5, 5, 5), 2)  # [5, 5]
     # One unpack of all 50 words to 50 x 31 bits: the first 1550 features in order.
     all_words = jnp.concatenate([local.reshape(-1), blocks.reshape(-1)])
-    bits = (all_words[:, None] >> jnp.arange(K, dtype=jnp.uint32)) & jnp.uint32(1)
     inventory = jnp.clip(state.inventory, 0, 255).astype(jnp.uint8)
     return jnp.concatenate([
-        bits.reshape(-1).astype(jnp.uint8),
+        ((all_words[:, None] >> _BIT_SHIFTS) & np.uint32(1)).astype(jnp.uint8).reshape(-1),
         inventory,
         _facing(state.direction).astype(jnp.uint8),
         jnp.ones(1, jnp.uint8),
