@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.core import spaces
-from smjax.core.env import Environment
+from smjax.core.env import Environment, select_tree
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import all_actions
 from smjax.envs.football.physics import dot2, norm2
@@ -87,6 +87,24 @@ class FootballEnv(Environment[FootballState, FootballParams]):
             "goals": goals,
         }
         return self.get_obs(new, params), new, reward, jnp.bool_(False), truncated, info
+
+    def step(self, key: jax.Array, state: FootballState, action: jax.Array,
+             params: FootballParams | None = None):
+        """Auto-resetting step, as ``Environment.step``, minus its key split.
+
+        ``reset_env`` ignores its key (every match starts from the same kick-off), so
+        the split the base class makes for it would only cost a threefry call per step.
+        """
+        if params is None:
+            params = self.default_params
+        obs_st, state_st, reward, terminated, truncated, info = self.step_env(key, state, action, params)
+        obs_re, state_re = self.reset_env(key, params)
+        done = jnp.logical_or(terminated, truncated)
+        state = select_tree(done, state_re, state_st)
+        obs = jnp.where(done, obs_re, obs_st)
+        info = dict(info)
+        info["final_observation"] = obs_st
+        return obs, state, reward, terminated, truncated, info
 
     def action_space(self, params: FootballParams | None = None) -> spaces.Discrete:
         return spaces.Discrete(C.BUILTIN_AI + 1, shape=(C.NUM_PLAYERS,))
