@@ -4,6 +4,15 @@ Registers ``football/11v11_easy``, ``football/11v11_medium`` and ``football/11v1
 (opponent difficulty 0.05 / 0.6 / 0.95). Overrides: ``observation`` ("simple115" or
 "paper"), ``game_length`` (3000), ``checkpoint_reward`` (False) and ``difficulty``
 (None = the task's level).
+
+Where things are (each module's docstring documents the rules it implements):
+constants (pitch, formation, action ids, physics constants), state (state, params,
+per-tick random draws, kick-off, the mirror map), physics (sticky controls, movement,
+passes, shots, ball flight), rules (possession, tackles, fouls, goals, out of play,
+restarts, ``step_game``), builtin_ai (the one AI both teams use and how difficulty acts),
+match (AI-vs-AI ``play_match``), observation (both layouts, every index), templates
+(option templates and hierarchies), render, env (``FootballEnv``: reward, info,
+truncation).
 """
 from __future__ import annotations
 
