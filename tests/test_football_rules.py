@@ -8,7 +8,8 @@ from hypothesis import given, settings, strategies as st
 
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import quantize_direction
-from smjax.envs.football.state import kickoff_positions
+from smjax.envs.football.rules import step_game
+from smjax.envs.football.state import draw_noise, initial_state, kickoff_positions
 from test_football_scenes import parked_positions, run_jit, scene
 
 IDLE22 = np.zeros(22, np.int32)
@@ -160,3 +161,36 @@ def test_sprint_is_faster_and_release_direction_stops():
     stop, _, _ = run_jit(s, _act(p3=C.RELEASE_DIRECTION), 20)
     assert float(sprint.pos[3, 0]) > float(run_.pos[3, 0]) > 0.1
     assert float(stop.pos[3, 0]) < 0.01
+
+
+def _random_play(seed: int, ticks: int):
+    def body(s, k):
+        ka, kn = jax.random.split(k)
+        actions = jax.random.randint(ka, (22,), 0, 19)
+        s2, goals = step_game(s, actions, draw_noise(kn))
+        return s2, (s2, goals)
+
+    return jax.lax.scan(body, initial_state(0), jax.random.split(jax.random.PRNGKey(seed), ticks))[1]
+
+
+_random_play_jit = jax.jit(_random_play, static_argnums=1)
+
+
+@given(seed=st.integers(0, 2**31 - 1))
+@settings(max_examples=6, deadline=None)
+def test_invariants_hold_under_random_play(seed):
+    states, goals = _random_play_jit(seed, 300)
+    pos, owner = np.asarray(states.pos), np.asarray(states.owner)
+    ball = np.asarray(states.ball_pos)
+    assert np.all(np.isfinite(pos)) and np.all(np.isfinite(ball))
+    assert np.all(np.abs(pos[..., 0]) <= C.PLAYER_BOUND_X + 1e-6)
+    assert np.all(np.abs(pos[..., 1]) <= C.PLAYER_BOUND_Y + 1e-6)
+    assert np.all(ball[:, 2] >= 0.0) and np.all((owner >= -1) & (owner < 22))
+    assert np.all((np.asarray(states.game_mode) >= 0) & (np.asarray(states.game_mode) < 7))
+    held = owner >= 0
+    carrier_pos = pos[np.arange(len(owner)), np.maximum(owner, 0)]
+    gap = np.linalg.norm(ball[:, :2] - carrier_pos, axis=1)
+    assert np.all(gap[held] <= C.BALL_OFFSET + 1e-5)   # a controlled ball is at his feet
+    np.testing.assert_array_equal(np.asarray(states.score)[-1], np.asarray(goals).sum(0))
+    # Only one of the two teams can score in a tick.
+    assert np.all(np.asarray(goals).sum(1) <= 1)

@@ -21,7 +21,7 @@ from smjax.core import spaces
 from smjax.core.env import Environment, select_tree
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import all_actions
-from smjax.envs.football.physics import dot2, norm2
+from smjax.envs.football.physics import norm2
 from smjax.envs.football.observation import OBSERVATION_SIZES, observe
 from smjax.envs.football.rules import step_game
 from smjax.envs.football.state import FootballParams, FootballState, draw_noise, initial_state

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import jax
-import jax.numpy as jnp
 
 from smjax.envs.football.builtin_ai import all_actions
 from smjax.envs.football.rules import step_game

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.envs.football import constants as C
-from smjax.envs.football.physics import dot2, norm2
+from smjax.envs.football.physics import norm2
 from smjax.envs.football.state import FootballState, player_team
 
 OBSERVATION_SIZES = {"simple115": 115, "paper": 139}

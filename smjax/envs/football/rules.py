@@ -37,7 +37,7 @@ import jax.numpy as jnp
 from smjax.core.env import select_tree
 from smjax.envs.football import constants as C
 from smjax.envs.football import physics
-from smjax.envs.football.physics import dot2, norm2
+from smjax.envs.football.physics import norm2
 from smjax.envs.football.state import FootballState, Noise, kickoff, player_team, team_sign
 
 _IDX = jnp.arange(C.NUM_TOTAL)
