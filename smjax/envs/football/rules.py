@@ -57,7 +57,8 @@ def _push_out(pos: jax.Array, centre: jax.Array, mask: jax.Array, radius: float,
     delta = pos - centre
     dist = norm2(delta)
     unit = jnp.where(dist[:, None] > 1e-6, delta / (dist[:, None] + 1e-9), fallback)
-    pushed = centre + unit * radius
+    bound = jnp.array([C.PLAYER_BOUND_X, C.PLAYER_BOUND_Y])
+    pushed = jnp.clip(centre + unit * radius, -bound, bound)
     return jnp.where((mask & (dist < radius))[:, None], pushed, pos)
 
 

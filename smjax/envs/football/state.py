@@ -122,10 +122,11 @@ def kickoff_positions(kicking_team) -> jax.Array:
 
 def kickoff(state: FootballState, kicking_team) -> FootballState:
     """Reset players and ball for a kick-off taken by ``kicking_team`` (score kept)."""
-    pos = kickoff_positions(kicking_team)
     sign = jnp.where(jnp.arange(C.NUM_TOTAL) < C.NUM_PLAYERS, 1.0, -1.0)
     facing = jnp.stack([sign, jnp.zeros_like(sign)], axis=1)
     taker = C.NUM_PLAYERS * kicking_team + 1
+    # The taker stands just behind the ball on the centre spot, facing the other goal.
+    pos = kickoff_positions(kicking_team).at[taker].set(-facing[taker] * C.BALL_OFFSET)
     zeros_i = jnp.zeros((C.NUM_TOTAL,), jnp.int32)
     zeros_b = jnp.zeros((C.NUM_TOTAL,), bool)
     return state.replace(
