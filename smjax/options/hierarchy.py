@@ -40,6 +40,9 @@ class Hierarchy:
     def __post_init__(self):
         if not isinstance(self.task, str) or not self.task:
             raise HierarchyError(f"hierarchy task must be a non-empty name, got {self.task!r}")
+        non_names = [k for k in self.children if not isinstance(k, str)]
+        if non_names:  # checked first: later messages sort and compare names
+            raise HierarchyError(f"option names must be strings, got {non_names!r}")
         if self.task in self.templates:
             raise HierarchyError(
                 f"task {self.task!r} is also a template name; the root option needs its own name"
@@ -83,6 +86,8 @@ class Hierarchy:
             )
         out: list[str] = []
         for kid in kids:
+            if not isinstance(kid, str):
+                raise HierarchyError(f"{parent!r} lists a child that is not a name: {kid!r}")
             if kid == ALL_PRIMITIVES:
                 if not self.primitive_names:
                     raise HierarchyError(
