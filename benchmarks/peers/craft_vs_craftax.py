@@ -1,0 +1,125 @@
+"""smjax Craft's step vs Craftax-Classic's step (symbolic observations, same batch sizes).
+
+Each measurement is one jitted ``lax.scan`` of ``--steps`` auto-resetting steps over
+``num_envs`` environments with uniformly random actions drawn inside the scan; the
+observation rides in the carry so every step materialises it (as a rollout buffer or a
+network input would). Compile is timed separately; the median of ``--repeats`` runs is
+reported::
+
+    python benchmarks/peers/craft_vs_craftax.py --num-envs 64 1024 4096 --steps 64
+
+Work per step differs a lot: smjax's ``craft/get_gem`` is the paper's small Craft world
+(a few hundred cells, 5 primitive actions, no creatures, no day/night, no health or
+food), while Craftax-Classic simulates a 64x64 world with zombies, skeletons, cows and
+arrows, daylight, health/food/drink/energy, 17 actions and 22 achievements, and its
+gymnax-style auto-reset generates a whole new 64x64 world (noise maps) inside every
+step and selects it only where an episode ended.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+import jax
+import jax.numpy as jnp
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _common  # noqa: E402
+
+CRAFTAX_NAMES = ("Craftax-Classic-Symbolic-v1", "Craftax-Classic-Symbolic-AutoReset-v1")
+
+
+def make_smjax(obs_kind: str):
+    from smjax.envs.craft.env import make_craft
+
+    env, params = make_craft("get_gem", observation=obs_kind)
+    step = lambda key, state, action: env.step(key, state, action, params)[:3]  # noqa: E731
+    reset = lambda key: env.reset(key, params)  # noqa: E731
+    return reset, step, env.action_space(params).n, env.observation_space(params).shape
+
+
+def make_craftax():
+    from craftax.craftax_env import make_craftax_env_from_name
+
+    env = None
+    for name in CRAFTAX_NAMES:
+        try:
+            env = make_craftax_env_from_name(name, auto_reset=True)
+            break
+        except (ValueError, KeyError):
+            continue
+    if env is None:
+        raise ValueError(f"this craftax version knows none of {CRAFTAX_NAMES}")
+    params = env.default_params
+    step = lambda key, state, action: env.step(key, state, action, params)[:3]  # noqa: E731
+    reset = lambda key: env.reset(key, params)  # noqa: E731
+    return reset, step, env.action_space(params).n, env.observation_space(params).shape
+
+
+def make_runner(reset, step, num_actions: int, num_envs: int, steps: int):
+    vstep = jax.vmap(step)
+
+    def run(key):
+        key_reset, key = jax.random.split(key)
+        obs, state = jax.vmap(reset)(jax.random.split(key_reset, num_envs))
+
+        def body(carry, _):
+            state, key, acc, _ = carry
+            key, key_act, key_step = jax.random.split(key, 3)
+            actions = jax.random.randint(key_act, (num_envs,), 0, num_actions)
+            obs, state, reward = vstep(jax.random.split(key_step, num_envs), state, actions)
+            return (state, key, acc + reward.astype(jnp.float32).sum(), obs), None
+
+        (_, _, acc, obs), _ = jax.lax.scan(body, (state, key, jnp.float32(0), obs), None, steps)
+        return acc + jnp.sum(obs, dtype=jnp.float32)
+
+    return run
+
+
+def main(argv=None) -> dict:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--num-envs", type=int, nargs="+", default=[64, 1024, 4096])
+    p.add_argument("--steps", type=int, default=64, help="steps per timed scan")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--smjax-obs", nargs="+", default=["paper", "compact"], choices=["paper", "compact", "none"])
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "craft_vs_craftax.json"))
+    args = p.parse_args(argv)
+
+    variants = {f"smjax craft/get_gem ({kind})": make_smjax(kind) for kind in args.smjax_obs}
+    variants["Craftax-Classic symbolic"] = make_craftax()
+    key = jax.random.PRNGKey(args.seed)
+    results = []
+    for num_envs in args.num_envs:
+        row = {"num_envs": num_envs}
+        for name, (reset, step, num_actions, obs_shape) in variants.items():
+            timing = _common.compile_and_time(make_runner(reset, step, num_actions, num_envs, args.steps),
+                                              (key,), args.repeats)
+            timing.pop("output")
+            row[name] = dict(timing, steps_per_s=num_envs * args.steps / timing["median_s"],
+                             obs_shape=list(obs_shape), num_actions=num_actions)
+            print(f"[{num_envs}] {name}: {row[name]['steps_per_s']:,.0f} steps/s "
+                  f"(compile {timing['compile_s']:.1f}s)", flush=True)
+        craftax_sps = row["Craftax-Classic symbolic"]["steps_per_s"]
+        row["ratio_vs_craftax"] = {n: row[n]["steps_per_s"] / craftax_sps for n in variants if n.startswith("smjax")}
+        results.append(row)
+    names = list(variants)
+    _common.print_table(
+        ["num_envs"] + [f"{n} steps/s" for n in names] + [f"ratio {n.split('(')[-1].rstrip(')')}/craftax"
+                                                           for n in names if n.startswith("smjax")],
+        [[r["num_envs"]] + [r[n]["steps_per_s"] for n in names] + list(r["ratio_vs_craftax"].values())
+         for r in results])
+    summary = {"benchmark": "craft_vs_craftax", "config": {k: v for k, v in vars(args).items() if k != "json"},
+               "machine": _common.machine(), "versions": _common.versions("craftax", "smjax"), "results": results}
+    _common.write_json(args.json, summary)
+    print(json.dumps({"benchmark": "craft_vs_craftax", "loadavg": summary["machine"]["loadavg_1_5_15"],
+                      "results": {str(r["num_envs"]): {**{n: round(r[n]["steps_per_s"]) for n in names},
+                                                       "ratios": {k: round(v, 2) for k, v in r["ratio_vs_craftax"].items()}}
+                                  for r in results}}))
+    return summary
+
+
+if __name__ == "__main__":
+    main()
