@@ -189,6 +189,42 @@ def _cmd_plot(args) -> int:
     return 0
 
 
+def _add_render(sub):
+    p = sub.add_parser("render", help="write a GIF of an episode")
+    p.add_argument("task")
+    p.add_argument("--policy", default=None, metavar="DIR",
+                   help="a run directory: play its trained hierarchy (no teleports); default: random actions")
+    p.add_argument("--out", default="episode.gif")
+    p.add_argument("--steps", type=int, default=200, help="most steps to render")
+    p.add_argument("--seed-index", type=int, default=0, help="which of the run's seeds to play")
+    p.add_argument("--fps", type=float, default=8)
+    p.add_argument("--env", action="append", metavar="KEY=VALUE", help="environment override (random play)")
+
+
+def _cmd_render(args) -> int:
+    from smjax.train.policy import frames_of, play_random, play_trained
+    from smjax.viz.gif import write_gif
+
+    try:
+        if args.policy:
+            env, params, states, total = play_trained(args.policy, seed_index=args.seed_index,
+                                                      max_ticks=args.steps)
+            if env.name != args.task:
+                print(f"error: {args.policy} is a run of {env.name!r}, not {args.task!r}", file=sys.stderr)
+                return 2
+            note = f"return {total:.2f}"
+        else:
+            env, params, states = play_random(args.task, steps=args.steps,
+                                              env_overrides=_key_values(args.env, "--env"))
+            note = "random actions"
+        write_gif(frames_of(env, params, states), args.out, fps=args.fps)
+    except (KeyError, ValueError, TypeError, FileNotFoundError, RuntimeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.out} ({len(states)} frames, {note})")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="smjax", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -197,11 +233,13 @@ def main(argv=None) -> int:
     _add_bench(sub)
     _add_list(sub)
     _add_plot(sub)
+    _add_render(sub)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
         return 0
-    return {"train": _cmd_train, "bench": _cmd_bench, "list": _cmd_list, "plot": _cmd_plot}[args.command](args)
+    return {"train": _cmd_train, "bench": _cmd_bench, "list": _cmd_list, "plot": _cmd_plot,
+            "render": _cmd_render}[args.command](args)
 
 
 if __name__ == "__main__":

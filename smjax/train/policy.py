@@ -1,0 +1,80 @@
+"""Load a trained hierarchy from a run directory and play it (for ``smjax render``)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from smjax.core.registry import make
+from smjax.options.runner import NO_OPTION, Controls
+from smjax.train import checkpoint as ckpt
+from smjax.train.config import TrainConfig
+from smjax.train.engine import Engine
+from smjax.train.loop import HierarchyTrainer, plan_levels, resolve_hierarchy
+
+
+def load_trained(run_dir: str | Path):
+    """(engine, bank, learned, seeds) of the run checkpointed in ``run_dir``."""
+    from smjax.agents import make_agent
+
+    info = ckpt.load_meta(run_dir)
+    if info is None:
+        raise FileNotFoundError(f"{run_dir} holds no checkpoint (train with --out {run_dir} first)")
+    run = info["meta"]["run"]
+    fields = set(TrainConfig.__dataclass_fields__)
+    cfg = TrainConfig.from_dict({k: v for k, v in run.items() if k in fields})
+    env, params = make(run["task"], **run["env_overrides"])
+    _, hierarchy = resolve_hierarchy(env, cfg)
+    engine = Engine(env, params, hierarchy, make_agent(cfg.algo, **cfg.agent), cfg)
+    trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), run["seeds"],
+                               out_dir=run_dir, progress=False, run_meta=run)
+    trainer.restore()
+    return engine, trainer.arrays["bank"], trainer.arrays["learned"], run["seeds"]
+
+
+def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 500, key=None):
+    """States of one episode of the trained hierarchy (no teleports), seed ``seed_index``."""
+    engine, bank, learned, seeds = load_trained(run_dir)
+    if not 0 <= seed_index < len(seeds):
+        raise ValueError(f"seed_index must be in [0, {len(seeds)}), got {seed_index}")
+    bank = jax.tree.map(lambda x: x[seed_index], bank)
+    learned = learned[seed_index]
+    runner = engine.eval_runner
+    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned)
+    key = jax.random.PRNGKey(0) if key is None else key
+    key, k_reset, k_init = jax.random.split(key, 3)
+    carry = runner.reset(k_reset, controls, 1)
+    dummy = engine.agent.init(k_init, engine.example_obs, engine.num_actions)
+    tick = jax.jit(lambda c, k: runner.tick(c, k, dummy, bank, controls))
+    states, total = [jax.tree.map(lambda x: x[0], carry.env_state)], 0.0
+    for _ in range(max_ticks):
+        key, k = jax.random.split(key)
+        new, tr, ends = tick(carry, k)
+        total += float(tr.reward[0])
+        if bool(ends.reset[0]):
+            break  # the next state already belongs to a new episode
+        carry = new
+        states.append(jax.tree.map(lambda x: x[0], carry.env_state))
+    return engine.env, engine.env_params, states, total
+
+
+def play_random(task: str, *, steps: int = 100, seed: int = 0, env_overrides: dict | None = None):
+    """States of a uniformly random policy (one environment, auto-reset)."""
+    env, params = make(task, **(env_overrides or {}))
+    key = jax.random.PRNGKey(seed)
+    key, k = jax.random.split(key)
+    _, state = env.reset(k, params)
+    step = jax.jit(env.step)
+    space = env.action_space(params)
+    states = [state]
+    for _ in range(steps):
+        key, k_act, k_step = jax.random.split(key, 3)
+        _, state, *_ = step(k_step, state, space.sample(k_act), params)
+        states.append(state)
+    return env, params, states
+
+
+def frames_of(env, params, states) -> list[np.ndarray]:
+    return [np.asarray(env.render(s, params), np.uint8) for s in states]

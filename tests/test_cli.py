@@ -1,0 +1,80 @@
+"""The command line: help, list, bench JSON line, a tiny train + resume + render + plot, errors."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from smjax.cli import main
+
+
+def test_help_lists_commands(capsys):
+    assert main([]) == 0
+    out = capsys.readouterr().out
+    for cmd in ("train", "bench", "list", "plot", "render"):
+        assert cmd in out
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    assert "--resume" in capsys.readouterr().out
+
+
+def test_list_shows_craft_tasks_and_hierarchies(capsys):
+    assert main(["list", "craft/get_g", "--hierarchies"]) == 0
+    out = capsys.readouterr().out
+    assert "craft/get_gem" in out and "craft/get_gold" in out
+    assert "[paper]" in out and "give_axe -> give_stick, give_iron" in out
+
+
+def test_bench_prints_one_json_line():
+    proc = subprocess.run([sys.executable, "-m", "smjax", "bench", "craft/get_wood", "--num-envs", "8",
+                           "--steps", "5", "--repeats", "1"], capture_output=True, text=True,
+                          env={"JAX_PLATFORMS": "cpu", "PATH": "/usr/bin:/bin"}, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    line = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert line["env"] == "craft/get_wood" and line["num_envs"] == 8 and line["steps"] == 5
+    assert line["steps_per_second"] > 0 and line["compile_seconds"] > 0 and line["device"] == "cpu"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["train", "craft/get_diamond", "--quiet"], "unknown task 'craft/get_diamond'"),
+    (["train", "craft/get_wood", "--set", "num_envs=0", "--quiet"], "'num_envs' = 0"),
+    (["train", "craft/get_wood", "--set", "bogus=1", "--quiet"], "unknown config field"),
+    (["train", "craft/get_wood", "--env", "colour=red", "--quiet"], "unknown override"),
+    (["bench", "nope/nothing"], "unknown task"),
+    (["render", "craft/get_wood", "--policy", "/nonexistent/run"], "holds no checkpoint"),
+])
+def test_bad_input_is_a_clear_error(argv, message, capsys, tmp_path):
+    if argv[0] == "train":
+        argv = argv + ["--out", str(tmp_path / "r")]
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_train_resume_render_plot(tmp_path, capsys):
+    out = tmp_path / "wood"
+    args = ["train", "craft/get_wood", "--seeds", "1", "--num-envs", "16", "--max-episodes", "60",
+            "--env", "observation=compact", "--set", "rollout_ticks=8", "--set", "eval_envs=8",
+            "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    summary = json.loads(capsys.readouterr().out.splitlines()[0])
+    assert summary["task"] == "get_wood" and summary["method"] == "top-down"
+    results = json.loads((out / "results.json").read_text())
+    assert results["config"]["num_envs"] == 16
+    # the same directory again without --resume is refused; --resume of a finished run is fine
+    assert main(args) == 2
+    assert "already holds" in capsys.readouterr().err
+    assert main(["train", "craft/get_wood", "--resume", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["train", "craft/get_wood", "--resume", str(out), "--set", "gamma=0.5", "--quiet"]) == 2
+    assert "gamma" in capsys.readouterr().err
+    gif = tmp_path / "wood.gif"
+    assert main(["render", "craft/get_wood", "--policy", str(out), "--out", str(gif), "--steps", "20"]) == 0
+    with Image.open(gif) as im:
+        assert im.n_frames >= 1 and im.size[0] > 100
+        frame = im.convert("RGB")
+        assert len(np.unique(np.asarray(frame).reshape(-1, 3), axis=0)) > 5  # not blank
+    png = tmp_path / "overlay.png"
+    assert main(["plot", str(out), str(out), "--out", str(png)]) == 0
+    assert png.stat().st_size > 5000
