@@ -58,6 +58,30 @@ def compile_and_time(fn: Callable, args: tuple, repeats: int) -> dict[str, Any]:
     return {"compile_s": compile_s, "run_s": runs, "median_s": statistics.median(runs), "output": out}
 
 
+def compile_and_time_interleaved(programs: dict[str, tuple[Callable, tuple]], repeats: int) -> dict:
+    """``compile_and_time`` for several programs, with their timed runs alternating.
+
+    On a shared machine the load drifts; alternating A, B, A, B... spreads the drift
+    over all programs instead of charging it to whichever ran last.
+    """
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    compiled, results = {}, {}
+    for name, (fn, args) in programs.items():
+        start = time.perf_counter()
+        compiled[name] = jax.jit(fn).lower(*args).compile()
+        results[name] = {"compile_s": time.perf_counter() - start, "run_s": [], "output": None}
+        jax.block_until_ready(compiled[name](*args))  # warm-up run, untimed
+    for _ in range(repeats):
+        for name, (_, args) in programs.items():
+            start = time.perf_counter()
+            results[name]["output"] = jax.block_until_ready(compiled[name](*args))
+            results[name]["run_s"].append(time.perf_counter() - start)
+    for result in results.values():
+        result["median_s"] = statistics.median(result["run_s"])
+    return results
+
+
 def write_json(path: str, payload: dict) -> None:
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w") as f:

@@ -40,13 +40,14 @@ def make_smjax(obs_kind: str):
     return reset, step, env.action_space(params).n, env.observation_space(params).shape
 
 
-def make_craftax():
+def make_craftax(auto_reset: bool = True):
+    """Craftax-Classic symbolic; ``auto_reset=False`` is its step without the per-step world reset."""
     from craftax.craftax_env import make_craftax_env_from_name
 
     env = None
     for name in CRAFTAX_NAMES:
         try:
-            env = make_craftax_env_from_name(name, auto_reset=True)
+            env = make_craftax_env_from_name(name, auto_reset=auto_reset)
             break
         except (ValueError, KeyError):
             continue
@@ -84,21 +85,29 @@ def main(argv=None) -> dict:
     p.add_argument("--steps", type=int, default=64, help="steps per timed scan")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--smjax-obs", nargs="+", default=["paper", "compact"], choices=["paper", "compact", "none"])
+    p.add_argument("--craftax-no-reset", action="store_true",
+                   help="also time Craftax-Classic without auto-reset (its step_env alone; episodes "
+                        "then run on past their end, which only matters for timing)")
+    p.add_argument("--craftax-steps", type=int, default=None,
+                   help="steps per timed scan for Craftax (default: --steps); Craftax is slow on CPU")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "craft_vs_craftax.json"))
     args = p.parse_args(argv)
 
     variants = {f"smjax craft/get_gem ({kind})": make_smjax(kind) for kind in args.smjax_obs}
     variants["Craftax-Classic symbolic"] = make_craftax()
+    if args.craftax_no_reset:
+        variants["Craftax-Classic symbolic, no auto-reset"] = make_craftax(auto_reset=False)
     key = jax.random.PRNGKey(args.seed)
     results = []
     for num_envs in args.num_envs:
         row = {"num_envs": num_envs}
         for name, (reset, step, num_actions, obs_shape) in variants.items():
-            timing = _common.compile_and_time(make_runner(reset, step, num_actions, num_envs, args.steps),
+            steps = args.steps if name.startswith("smjax") or args.craftax_steps is None else args.craftax_steps
+            timing = _common.compile_and_time(make_runner(reset, step, num_actions, num_envs, steps),
                                               (key,), args.repeats)
             timing.pop("output")
-            row[name] = dict(timing, steps_per_s=num_envs * args.steps / timing["median_s"],
+            row[name] = dict(timing, steps_per_s=num_envs * steps / timing["median_s"], steps=steps,
                              obs_shape=list(obs_shape), num_actions=num_actions)
             print(f"[{num_envs}] {name}: {row[name]['steps_per_s']:,.0f} steps/s "
                   f"(compile {timing['compile_s']:.1f}s)", flush=True)

@@ -73,10 +73,11 @@ def smjax_trainer(args, gymnax_env, gymnax_params):
     train = make_train(config, env, params, agent)
 
     def run(key):
-        state, _ = train(key)
-        return state.params
+        state, metrics = train(key)
+        # The episode count keeps the rollouts live even when the update is ablated away.
+        return state.params, metrics["episodes"].sum()
 
-    return run, lambda p, obs: agent.policy_logits(p, obs), num_updates * args.num_envs * args.num_steps
+    return run, lambda p, obs: agent.policy_logits(p[0], obs), num_updates * args.num_envs * args.num_steps
 
 
 def rejax_trainer(args, gymnax_env, gymnax_params):
@@ -95,6 +96,8 @@ def rejax_trainer(args, gymnax_env, gymnax_params):
     def run(key):
         ts, _ = algo.train(key)
         return ts.actor_ts.params
+
+    run.algo = algo  # for profile_flat_ppo.py's ablations
 
     def logits(params, obs):
         return algo.actor.apply(params, obs, method="_action_dist").logits
@@ -144,9 +147,14 @@ def main(argv=None) -> dict:
         gymnax_env, gymnax_params = gymnax.make(env_id)
         evaluate = make_evaluator(args, gymnax_env, gymnax_params)
         row = {"env": env_id}
-        for name, maker in (("smjax", smjax_trainer), ("rejax", rejax_trainer)):
-            run, logits_fn, steps = maker(args, gymnax_env, gymnax_params)
-            timing = _common.compile_and_time(run, (key,), args.repeats)
+        made = {name: maker(args, gymnax_env, gymnax_params)
+                for name, maker in (("smjax", smjax_trainer), ("rejax", rejax_trainer))}
+        # Timed runs alternate between the learners so that load changes on a shared
+        # machine hit both alike.
+        timings = _common.compile_and_time_interleaved(
+            {name: (run, (key,)) for name, (run, _, _) in made.items()}, args.repeats)
+        for name, (_, logits_fn, steps) in made.items():
+            timing = timings[name]
             ret = float(evaluate(logits_fn, timing.pop("output"), jax.random.PRNGKey(args.seed + 1)))
             row[name] = dict(timing, env_steps=steps, steps_per_s=steps / timing["median_s"], final_return=ret)
             print(f"[{env_id}] {name}: compile {timing['compile_s']:.1f}s, runs {timing['run_s']}, "

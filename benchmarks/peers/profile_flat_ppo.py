@@ -1,18 +1,27 @@
-"""Where smjax's flat PPO spends its time relative to rejax: rollout vs update, per learner.
+"""Where smjax's flat PPO spends its time relative to rejax's: rollout vs update.
 
-Times, for one gymnax environment and one configuration, the compiled
-(a) rollout only (``num_updates`` rollouts of ``num_steps`` ticks, no learning) and
-(b) update only (``num_updates`` PPO updates on one fixed rollout), for smjax's PPO
-and for rejax's PPO (``collect_trajectories`` / the rest of ``train_iteration``)::
+Ablations of the end-to-end jitted training programs, same form for both learners, on
+one gymnax environment and the ``ppo_vs_rejax.py`` hyper-parameters:
 
-    python benchmarks/peers/profile_flat_ppo.py --env CartPole-v1 --num-envs 16 --num-steps 128
+* full training (``num_updates`` x (rollout + update));
+* rollout only: the same program with the learner update removed (smjax: an agent
+  whose ``update`` returns its state unchanged; rejax: ``collect_trajectories`` alone);
+* smjax with the update's minibatch assignment swapped for a plain permutation (as
+  rejax does), which isolates the cost of dealing decisions evenly (an ``argsort``).
+
+The update's cost is full - rollout only::
+
+    python benchmarks/peers/profile_flat_ppo.py --env CartPole-v1 --num-envs 16 --num-steps 128 \
+        --total-steps 65536
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import statistics
 import sys
+import time
 
 import jax
 import jax.numpy as jnp
@@ -20,92 +29,97 @@ import jax.numpy as jnp
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _common  # noqa: E402
 from ppo_vs_rejax import parse_args as ppo_args  # noqa: E402
+from ppo_vs_rejax import rejax_trainer, smjax_trainer  # noqa: E402
+
+
+def permutation_indices(key, decision, num_minibatches):
+    """rejax-style minibatches: one random permutation split in equal parts (no dealing)."""
+    num_items = decision.shape[0]
+    size = -(-num_items // num_minibatches)
+    pad = num_minibatches * size - num_items
+    order = jax.random.permutation(key, num_items)
+    idx = jnp.concatenate([order, jnp.zeros((pad,), order.dtype)])
+    real = jnp.concatenate([jnp.ones((num_items,), bool), jnp.zeros((pad,), bool)])
+    return idx.reshape(num_minibatches, size), real.reshape(num_minibatches, size)
+
+
+def smjax_variant(cfg, genv, gparams, variant: str):
+    from smjax.agents import make_agent as real_make_agent
+    from smjax.agents import ppo
+
+    import smjax.agents as agents_pkg
+
+    saved_make, saved_idx = agents_pkg.make_agent, ppo.minibatch_indices
+    try:
+        if variant == "rollout only":
+            def no_update_agent(algo, **kw):
+                agent = real_make_agent(algo, **kw)
+                return agent._replace(update=lambda state, traj, last_obs, key: (state, {}))
+            agents_pkg.make_agent = no_update_agent
+        elif variant == "permutation minibatches":
+            ppo.minibatch_indices = permutation_indices
+        run, _, steps = smjax_trainer(cfg, genv, gparams)
+        # make_train traces lazily: trace now, while the patch is in place.
+        lowered = jax.jit(run).lower(jax.random.PRNGKey(cfg.seed))
+    finally:
+        agents_pkg.make_agent, ppo.minibatch_indices = saved_make, saved_idx
+    return lowered, steps
 
 
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", default="CartPole-v1")
-    p.add_argument("--updates", type=int, default=8, help="rollouts (and updates) per timed program")
     args, rest = p.parse_known_args(argv)
     cfg = ppo_args(rest + ["--envs", args.env])
 
     import gymnax
-    from rejax import PPO
-
-    from smjax.agents import Transition, make_agent
-    from smjax.core import EpisodeStatistics
-    from smjax.core.adapters import from_gymnax
 
     genv, gparams = gymnax.make(args.env)
-    env, params = from_gymnax(genv, gparams)
-    stats_env = EpisodeStatistics(env)
-    agent = make_agent("ppo", learning_rate=cfg.lr, update_epochs=cfg.epochs, num_minibatches=cfg.minibatches,
-                       hidden_sizes=cfg.hidden, activation=cfg.activation, max_grad_norm=cfg.max_grad_norm,
-                       adam_eps=1e-8)
-    n, t, u = cfg.num_envs, cfg.num_steps, args.updates
-    num_actions = env.action_space(params).n
     key = jax.random.PRNGKey(cfg.seed)
-    obs0, state0 = jax.vmap(stats_env.reset, in_axes=(0, None))(jax.random.split(key, n), params)
-    agent_state = agent.init(key, obs0[0], num_actions)
-    mask = jnp.ones((n, num_actions), bool)
+    programs = {}
+    for variant in ("full", "rollout only", "permutation minibatches"):
+        programs[f"smjax {variant}"] = smjax_variant(cfg, genv, gparams, variant)
 
-    def smjax_rollout(agent_state, env_state, obs, key):
-        def tick(carry, _):
-            env_state, obs, key = carry
-            key, key_act, key_step = jax.random.split(key, 3)
-            out = agent.act(agent_state, obs, mask, key_act)
-            nobs, env_state, reward, term, trunc, _ = jax.vmap(stats_env.step, in_axes=(0, 0, 0, None))(
-                jax.random.split(key_step, n), env_state, out.action, params)
-            done = term | trunc
-            tr = Transition(obs=obs, action=out.action, action_mask=mask, log_prob=out.log_prob,
-                            value=out.value, decision=jnp.ones_like(done), reward=reward,
-                            discount=jnp.full(done.shape, 0.99), done=done)
-            return (env_state, nobs, key), tr
-        return jax.lax.scan(tick, (env_state, obs, key), None, t)
+    run, _, steps = rejax_trainer(cfg, genv, gparams)
+    programs["rejax full"] = (jax.jit(run).lower(key), steps)
+    algo = run.algo
 
-    def smjax_rollouts(key):
-        def body(carry, _):
-            carry, traj = smjax_rollout(agent_state, *carry)
-            return carry, traj.reward.sum()
-        return jax.lax.scan(body, (state0, obs0, key), None, u)[1]
+    def rejax_rollout_only(key):
+        ts = jax.lax.fori_loop(0, steps // (cfg.num_envs * cfg.num_steps),
+                               lambda _, ts: algo.collect_trajectories(ts)[0], algo.init_state(key))
+        return ts.last_obs.sum() + ts.global_step
 
-    (_, last_obs, _), traj = jax.jit(smjax_rollout)(agent_state, state0, obs0, key)
-
-    def smjax_updates(key):
-        def body(s, k):
-            s, m = agent.update(s, traj, last_obs, k)
-            return s, m["total_loss"]
-        return jax.lax.scan(body, agent_state, jax.random.split(key, u))[1]
-
-    algo = PPO.create(env=genv, env_params=gparams, num_envs=n, num_steps=t, num_epochs=cfg.epochs,
-                      num_minibatches=cfg.minibatches, learning_rate=cfg.lr, max_grad_norm=cfg.max_grad_norm,
-                      total_timesteps=n * t * u, eval_freq=n * t * u, skip_initial_evaluation=True,
-                      agent_kwargs={"activation": cfg.activation, "hidden_layer_sizes": cfg.hidden})
-
-    def rejax_rollouts(key):
-        def body(ts, _):
-            ts, trajectories = algo.collect_trajectories(ts)
-            return ts, trajectories.reward.sum()
-        return jax.lax.scan(body, algo.init_state(key), None, u)[1]
-
-    def rejax_iterations(key):
-        ts = jax.lax.fori_loop(0, u, lambda _, ts: algo.train_iteration(ts), algo.init_state(key))
-        # A value that depends on the learned parameters, so nothing is dead code.
-        return sum(jnp.sum(leaf) for leaf in jax.tree.leaves(ts.actor_ts.params))
+    programs["rejax rollout only"] = (jax.jit(rejax_rollout_only).lower(key), steps)
 
     rows, out = [], {}
-    for name, fn in (("smjax rollout", smjax_rollouts), ("rejax rollout", rejax_rollouts),
-                     ("smjax update", smjax_updates), ("rejax rollout+update", rejax_iterations)):
-        timing = _common.compile_and_time(fn, (key,), cfg.repeats)
-        out[name] = {"median_s": timing["median_s"], "compile_s": timing["compile_s"],
-                     "env_steps_per_s": n * t * u / timing["median_s"]}
-        rows.append([name, timing["median_s"], n * t * u / timing["median_s"], timing["compile_s"]])
-    out["rejax update (derived)"] = {"median_s": out["rejax rollout+update"]["median_s"] - out["rejax rollout"]["median_s"]}
-    rows.append(["rejax update (derived)", out["rejax update (derived)"]["median_s"], float("nan"), float("nan")])
+    compiled, compile_s = {}, {}
+    for name, (lowered, _) in programs.items():
+        t0 = time.perf_counter()
+        compiled[name] = lowered.compile()
+        compile_s[name] = time.perf_counter() - t0
+        jax.block_until_ready(compiled[name](key))  # warm-up, untimed
+    runs = {name: [] for name in programs}
+    for _ in range(cfg.repeats):  # interleaved, so load drift hits every program alike
+        for name in programs:
+            t0 = time.perf_counter()
+            jax.block_until_ready(compiled[name](key))
+            runs[name].append(time.perf_counter() - t0)
+    for name, (_, steps) in programs.items():
+        med = statistics.median(runs[name])
+        out[name] = {"median_s": med, "run_s": runs[name], "compile_s": compile_s[name],
+                     "env_steps_per_s": steps / med}
+        rows.append([name, med, steps / med, compile_s[name]])
+    for who in ("smjax", "rejax"):
+        out[f"{who} update (full - rollout)"] = {
+            "median_s": out[f"{who} full"]["median_s"] - out[f"{who} rollout only"]["median_s"]}
+        rows.append([f"{who} update (full - rollout)", out[f"{who} update (full - rollout)"]["median_s"], "", ""])
     _common.print_table(["program", "median s", "env steps/s", "compile s"], rows)
-    summary = {"benchmark": "profile_flat_ppo", "env": args.env, "num_envs": n, "num_steps": t, "updates": u,
+    summary = {"benchmark": "profile_flat_ppo", "env": args.env,
+               "config": {k: v for k, v in vars(cfg).items() if k != "json"},
                "machine": _common.machine(), "results": out}
-    print(json.dumps(summary, default=float))
+    print(json.dumps({"benchmark": "profile_flat_ppo", "env": args.env,
+                      "loadavg": summary["machine"]["loadavg_1_5_15"],
+                      "median_s": {k: round(v["median_s"], 4) for k, v in out.items()}}))
     return summary
 
 
