@@ -153,3 +153,77 @@ def test_flat_ppo_trains_on_adapted_cartpole():
     assert metrics["episodes"].shape == (3,)
     assert int(metrics["episodes"].sum()) > 0  # 384 random-ish CartPole steps end episodes
     chex.assert_tree_all_finite(metrics["total_loss"])
+
+
+class _GymnaxOneStyleCartPole:
+    """CartPole in gymnax >= 1.0's shape: step_env's flag is termination only and the
+    time limit is a separate ``is_truncated`` (built from gymnax 0.0.x's CartPole)."""
+
+    def __init__(self):
+        self.inner, self.default_params = gymnax.make("CartPole-v1")
+
+    def reset_env(self, key, params):
+        return self.inner.reset_env(key, params)
+
+    def step_env(self, key, state, action, params):
+        obs, state, reward, done, info = self.inner.step_env(key, state, action, params)
+        fell = jnp.logical_or(jnp.abs(state.x) > params.x_threshold,
+                              jnp.abs(state.theta) > params.theta_threshold_radians)
+        return obs, state, reward, fell, info
+
+    def is_truncated(self, state, params):
+        return state.time >= params.max_steps_in_episode
+
+    def action_space(self, params):
+        return self.inner.action_space(params)
+
+    def observation_space(self, params):
+        return self.inner.observation_space(params)
+
+
+def test_gymnax_one_api_uses_is_truncated():
+    genv = _GymnaxOneStyleCartPole()
+    env, params = from_gymnax(genv)
+    params = params.replace(max_steps_in_episode=3)
+    _, state = env.reset(jax.random.PRNGKey(0), params)
+    flags = []
+    for t in range(3):
+        _, state, _, terminated, truncated, _ = env.step_env(
+            jax.random.PRNGKey(t), state, jnp.int32(t % 2), params)
+        flags.append((bool(terminated), bool(truncated)))
+    assert flags == [(False, False), (False, False), (False, True)]
+    # Falling over is a termination, and then never also a truncation.
+    params = params.replace(max_steps_in_episode=500)
+    _, state = env.reset(jax.random.PRNGKey(0), params)
+    for t in range(100):
+        _, state, _, terminated, truncated, _ = env.step_env(jax.random.PRNGKey(t), state, jnp.int32(1), params)
+        if bool(terminated):
+            break
+    assert bool(terminated) and not bool(truncated)
+
+
+@pytest.mark.slow
+def test_peer_scripts_smoke(tmp_path):
+    """The peer benchmark scripts run end to end at tiny sizes and write their JSON."""
+    import importlib.util
+    import json
+    import os
+    import sys
+
+    pytest.importorskip("rejax", reason="rejax is an optional peer dependency")
+    here = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "peers")
+    sys.path.insert(0, os.path.abspath(here))
+    try:
+        spec = importlib.util.spec_from_file_location("ppo_vs_rejax", os.path.join(here, "ppo_vs_rejax.py"))
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        out = tmp_path / "ppo.json"
+        summary = module.main(["--envs", "CartPole-v1", "--num-envs", "4", "--num-steps", "16",
+                               "--total-steps", "128", "--minibatches", "2", "--epochs", "1",
+                               "--repeats", "1", "--eval-episodes", "4", "--eval-max-steps", "50",
+                               "--json", str(out)])
+        row = json.loads(out.read_text())["results"][0]
+        assert row["ratio_smjax_over_rejax"] > 0 and row["smjax"]["env_steps"] == 128
+        assert summary["versions"]["rejax"] != "missing"
+    finally:
+        sys.path.remove(os.path.abspath(here))
