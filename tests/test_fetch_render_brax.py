@@ -1,4 +1,9 @@
-"""Fetch & Stack rendering (skipped without an OpenGL backend) and the Brax adapter."""
+"""Fetch & Stack rendering (skipped without an OpenGL backend) and the Brax adapter.
+
+MuJoCo picks its GL backend when it is first imported: this file defaults MUJOCO_GL to
+egl, which only takes effect if no earlier test module imported mujoco. Run the suite
+with ``MUJOCO_GL=egl`` (or ``osmesa``) in the environment so rendering is not skipped.
+"""
 import os
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
