@@ -1,5 +1,16 @@
 """smjax: vectorized reinforcement learning with option templates, in JAX."""
-from smjax.core.registry import make, registry
+import os as _os
+
+# XLA:CPU (jaxlib 0.10) can deadlock executing larger vmapped programs (every thread
+# waiting, no progress; seen with batched network inits and 64-env MJX batches) under its
+# concurrency-optimized scheduler. Turning that scheduler off avoids it. The flag must be
+# set before the first computation; SMJAX_XLA_WORKAROUND=0 leaves XLA_FLAGS alone.
+_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+if _os.environ.get("SMJAX_XLA_WORKAROUND", "1") != "0" and \
+        "xla_cpu_enable_concurrency_optimized_scheduler" not in _os.environ.get("XLA_FLAGS", ""):
+    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " " + _FLAG).strip()
+
+from smjax.core.registry import make, registry  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = ["make", "registry", "__version__"]

@@ -46,12 +46,22 @@ class Engine:
         self.num_actions = hierarchy.num_actions
         self.chunk = jax.jit(jax.vmap(self._chunk, in_axes=(0, 0, 0, 0, None, None)),
                              donate_argnums=(0,))
-        self.evaluate = jax.jit(jax.vmap(self._evaluate, in_axes=(0, 0, 0)))
-        self.init_learner = jax.jit(jax.vmap(
-            lambda k: agent.init(k, self.example_obs, self.num_actions)))
+        self.evaluate = jax.jit(jax.vmap(self._evaluate, in_axes=(0, 0, 0, 0)))
+        self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         self.reset = jax.jit(jax.vmap(self._reset, in_axes=(0, None)))
 
     # ---- state -----------------------------------------------------------------
+    def init_learner(self, keys: jax.Array):
+        """Fresh learner states for each seed (leading axis S).
+
+        Initialised one seed at a time and stacked (once per level, so cheap): without the
+        scheduler flag set in ``smjax/__init__.py``, XLA:CPU (jaxlib 0.10) deadlocks running
+        ``jit(vmap(init))`` of these networks for some sizes; this keeps init safe even when
+        a user has opted out of that flag.
+        """
+        states = [self._init_one(k) for k in keys]
+        return jax.tree.map(lambda *xs: jnp.stack(xs), *states)
+
     def _reset(self, key: jax.Array, start: jax.Array) -> EnvCarry:
         controls = Controls(jnp.asarray(NO_OPTION), start, jnp.zeros((self.h.num_options,), bool))
         return self.runner.reset(key, controls, self.cfg.num_envs)
@@ -89,12 +99,12 @@ class Engine:
         return new, stats, metrics
 
     # ---- evaluation of the trained hierarchy, no teleports -------------------------
-    def _evaluate(self, key, bank, learned):
+    def _evaluate(self, key, bank, learned, learner_state):
         controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned)
         E = self.cfg.eval_envs
-        k_reset, k_init, key = jax.random.split(key, 3)
+        k_reset, key = jax.random.split(key)
         carry = self.eval_runner.reset(k_reset, controls, E)
-        dummy = self.agent.init(k_init, self.example_obs, self.num_actions)
+        dummy = learner_state  # never decides (no learner in evaluation); the tick needs one
 
         def cond(c):
             _, _, done, _, _, t = c

@@ -23,6 +23,7 @@ from smjax.options.hierarchy import Hierarchy
 from smjax.train import checkpoint as ckpt
 from smjax.train.config import TrainConfig
 from smjax.train.engine import Engine, SeedState
+from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
 
 
 class NonFiniteError(FloatingPointError):
@@ -111,6 +112,20 @@ class HierarchyTrainer:
         }
         self._compiled = None
         self._last_save = time.perf_counter()
+        self.mesh = training_mesh(S, self.cfg.num_envs)
+        self._place()
+
+    def _place(self) -> None:
+        """Put the training state on the mesh (seed axis, then environment axis)."""
+        if self.mesh is None:
+            return
+        arrays = self.arrays
+        self.arrays = {
+            "keys": jax.device_put(arrays["keys"], seed_sharding(self.mesh, arrays["keys"])),
+            "state": jax.device_put(arrays["state"], state_shardings(self.mesh, arrays["state"])),
+            "bank": jax.device_put(arrays["bank"], seed_sharding(self.mesh, arrays["bank"])),
+            "learned": jax.device_put(arrays["learned"], seed_sharding(self.mesh, arrays["learned"])),
+        }
 
     # ---- checkpoints -------------------------------------------------------------
     def save(self) -> None:
@@ -126,6 +141,7 @@ class HierarchyTrainer:
             return False
         self.arrays = ckpt.load_arrays(self.out_dir, self.arrays)
         self.host = info["meta"]["host"]
+        self._place()
         return True
 
     # ---- the loop ------------------------------------------------------------------
@@ -141,9 +157,10 @@ class HierarchyTrainer:
             self.save()
         keys, k_eval = _split_seeds(self.arrays["keys"], 2)
         t0 = time.perf_counter()
-        evaluate = self.engine.evaluate.lower(k_eval, self.arrays["bank"], self.arrays["learned"]).compile()
+        args = (k_eval, self.arrays["bank"], self.arrays["learned"], self.arrays["state"].learner)
+        evaluate = self.engine.evaluate.lower(*args).compile()
         self.host["compile_seconds"] += time.perf_counter() - t0
-        final = jax.tree.map(np.asarray, evaluate(k_eval, self.arrays["bank"], self.arrays["learned"]))
+        final = jax.tree.map(np.asarray, evaluate(*args))
         self.host["wall_seconds"] = time.perf_counter() - t_start
         return {"levels": self.host["levels"], "curves": self.host["curves"], "final": final,
                 "bank": self.arrays["bank"], "learned": self.arrays["learned"],
@@ -157,6 +174,7 @@ class HierarchyTrainer:
         carry = self.engine.reset(k_reset, jnp.asarray(plan.start))
         self.arrays["keys"] = keys
         self.arrays["state"] = SeedState(carry, learner, k_run)
+        self._place()
         self.host.update(in_level=True, episodes=[0] * S, env_steps=[0] * S, reached=[False] * S,
                          active=[True] * S, history=[[] for _ in range(S)], running=[None] * S)
 
@@ -167,6 +185,8 @@ class HierarchyTrainer:
         learner_arr, start_arr = jnp.asarray(plan.option), jnp.asarray(plan.start)
         while any(host["active"]):
             active = jnp.asarray(host["active"])
+            if self.mesh is not None:
+                active = jax.device_put(active, seed_sharding(self.mesh, active))
             args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
                     learner_arr, start_arr)
             if self._compiled is None:  # one compile serves every level (ids are traced)
@@ -226,6 +246,7 @@ class HierarchyTrainer:
         arrays["bank"] = self.engine.store_in_bank(arrays["bank"], arrays["state"].learner.params,
                                                    plan.option)
         arrays["learned"] = arrays["learned"].at[:, plan.option].set(True)
+        self._place()
         host["levels"].append({
             "template": plan.name, "level": plan.level, "episodes": list(host["episodes"]),
             "env_steps": list(host["env_steps"]), "reached": list(host["reached"]),
