@@ -69,6 +69,8 @@ def smjax_variant(cfg, genv, gparams, variant: str):
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", default="CartPole-v1")
+    p.add_argument("--profile-json", default=os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                                                          "profile_flat_ppo.json"))
     args, rest = p.parse_known_args(argv)
     cfg = ppo_args(rest + ["--envs", args.env])
 
@@ -116,7 +118,9 @@ def main(argv=None) -> dict:
     _common.print_table(["program", "median s", "env steps/s", "compile s"], rows)
     summary = {"benchmark": "profile_flat_ppo", "env": args.env,
                "config": {k: v for k, v in vars(cfg).items() if k != "json"},
-               "machine": _common.machine(), "results": out}
+               "machine": _common.machine(), "versions": _common.versions("gymnax", "rejax", "smjax"),
+               "results": out}
+    _common.write_json(args.profile_json, summary)
     print(json.dumps({"benchmark": "profile_flat_ppo", "env": args.env,
                       "loadavg": summary["machine"]["loadavg_1_5_15"],
                       "median_s": {k: round(v["median_s"], 4) for k, v in out.items()}}))
