@@ -99,12 +99,15 @@ class HierarchyRunner:
 
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, gamma: float,
                  frozen_policy: str = "greedy", allow_teleport: bool = True,
-                 reset_on_learner_end: bool = True):
+                 reset_on_learner_end: bool = True, frozen_temperature: float = 1.0):
         if frozen_policy not in ("greedy", "sample"):
             raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {frozen_policy!r}")
         self.env, self.env_params, self.h, self.agent = env, env_params, hierarchy, agent
         self.gamma = float(gamma)
         self.frozen_policy = frozen_policy
+        if not frozen_temperature > 0:
+            raise ValueError(f"frozen_temperature must be > 0, got {frozen_temperature}")
+        self.frozen_temperature = float(frozen_temperature)
         self.allow_teleport = bool(allow_teleport)
         self.reset_on_learner_end = bool(reset_on_learner_end)
         tpls = hierarchy.template_list
@@ -203,7 +206,7 @@ class HierarchyRunner:
         if self.frozen_policy == "greedy":
             frozen = jnp.argmax(logits, -1)
         else:
-            frozen = jax.random.categorical(k_frozen, logits, -1)
+            frozen = jax.random.categorical(k_frozen, logits / self.frozen_temperature, -1)
         frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)                     # [B, O]
 
         stack, primitive, teleported, scripted, decided = jax.vmap(
