@@ -20,8 +20,8 @@ def _load(run_dir: Path):
 def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
     """Overlay runs (e.g. top-down vs flat): one panel per level, mean +- std over seeds.
 
-    Episodes on the x axis are cumulative over the levels trained before, as the paper
-    counts them, so a run's panels read left to right as one budget.
+    Episodes on the x axis count from the start of each level (the run's total is the
+    sum over its panels, as the paper counts it).
     """
     import matplotlib
 
