@@ -23,6 +23,12 @@ def checkpoint_dir(out_dir: str | Path) -> Path:
     return Path(out_dir) / "checkpoints"
 
 
+def _flat(arrays: Any) -> dict:
+    """Leaves by position, without zero-size ones (orbax refuses them; e.g. MJX's empty
+    ``act``): restoring takes those from the template, where they are empty as well."""
+    return {str(i): x for i, x in enumerate(jax.tree.leaves(arrays)) if x.size > 0}
+
+
 def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> Path:
     import orbax.checkpoint as ocp
 
@@ -32,7 +38,7 @@ def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> 
     if target.exists():  # leftover of a crash before latest.json pointed at it
         shutil.rmtree(target)
     checkpointer = ocp.StandardCheckpointer()
-    checkpointer.save(target, arrays)
+    checkpointer.save(target, _flat(arrays))
     checkpointer.wait_until_finished()
     atomic_write_text(root / LATEST, json.dumps({"step": step, "path": target.name, "meta": meta}))
     for old in root.glob("step-*"):
@@ -54,6 +60,9 @@ def load_arrays(out_dir: str | Path, like: Any) -> Any:
     info = load_meta(out_dir)
     if info is None:
         raise FileNotFoundError(f"no checkpoint in {checkpoint_dir(out_dir)}")
-    abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, like)
+    abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, _flat(like))
     path = (checkpoint_dir(out_dir) / info["path"]).resolve()
-    return ocp.StandardCheckpointer().restore(path, abstract)
+    restored = ocp.StandardCheckpointer().restore(path, abstract)
+    leaves, treedef = jax.tree.flatten(like)
+    return jax.tree.unflatten(
+        treedef, [restored[str(i)] if x.size > 0 else x for i, x in enumerate(leaves)])
