@@ -67,6 +67,7 @@ def _add_train(sub):
     p.add_argument("--threshold", type=float, default=None, help="success threshold per level (0, 1]")
     p.add_argument("--max-episodes", type=int, default=None, help="episode budget per level")
     p.add_argument("--fixed-map", action="store_true", help="Craft: one fixed map per run (the paper's setting)")
+    p.add_argument("--tensorboard", action="store_true", help="also write TensorBoard event files to OUT/tensorboard")
     p.add_argument("--quiet", action="store_true", help="no progress bars; print only the summary line")
 
 
@@ -96,6 +97,8 @@ def _cmd_train(args) -> int:
                          ("max_episodes_per_level", args.max_episodes)):
         if value is not None:
             data[field] = value
+    if args.tensorboard:
+        data["tensorboard"] = True
     if args.agent:
         data["agent"] = dict(data.get("agent", {})) | _key_values(args.agent, "--agent")
     try:

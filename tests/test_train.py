@@ -86,3 +86,12 @@ def test_unknown_config_field_and_bad_seeds():
         run(make_keydoor(), TrainConfig(**SMALL), [1, 1], progress=False)
     with pytest.raises(ValueError, match="unknown hierarchy"):
         run(make_keydoor(), TrainConfig(**(SMALL | {"hierarchy": "nope"})), [0], progress=False)
+
+
+def test_craft_get_wood_reaches_threshold_on_cpu():
+    cfg = TrainConfig(num_envs=64, rollout_ticks=32, updates_per_chunk=4, max_episodes_per_level=6000,
+                      eval_envs=128)
+    res = run("craft/get_wood", cfg, [0], progress=False, env_overrides={"observation": "compact"})
+    level = res["levels"][0]
+    assert level["reached"] == [True] and level["final_running_success"][0] >= 0.8
+    assert res["final_success"][0] > 0.6  # the learned policy alone, fresh maps

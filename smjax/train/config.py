@@ -36,6 +36,8 @@ class TrainConfig:
       frozen_policy: how trained options act when frozen (auto: greedy for dqn, else sample).
       eval_envs: episodes run (one per environment) to measure final_success.
       eval_max_ticks: cap on an evaluation episode's length.
+      tensorboard: also write TensorBoard event files (OUT/tensorboard) of every level's
+        running success and episode count per seed.
       checkpoint_every: seconds between checkpoints when an output directory is given
         (0: after every chunk); a checkpoint is also written at the end of every level.
     """
@@ -54,6 +56,7 @@ class TrainConfig:
     eval_envs: int = 256
     eval_max_ticks: int = 2000
     checkpoint_every: float = 60.0
+    tensorboard: bool = False
     agent: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -78,6 +81,7 @@ class TrainConfig:
         need(self.frozen_policy in FROZEN_POLICIES, "frozen_policy", f"one of {FROZEN_POLICIES}")
         need(isinstance(self.checkpoint_every, (int, float)) and self.checkpoint_every >= 0,
              "checkpoint_every", ">= 0 seconds")
+        need(isinstance(self.tensorboard, bool), "tensorboard", "true or false")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
 
     def replace(self, **changes: Any) -> "TrainConfig":

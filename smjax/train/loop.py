@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 from dataclasses import dataclass
 from typing import Any
 
@@ -114,6 +115,11 @@ class HierarchyTrainer:
         self._last_save = time.perf_counter()
         self.mesh = training_mesh(S, self.cfg.num_envs)
         self._place()
+        self._tb = None
+        if self.cfg.tensorboard and out_dir is not None:
+            from tensorboardX import SummaryWriter
+
+            self._tb = SummaryWriter(str(Path(out_dir) / "tensorboard"))
 
     def _place(self) -> None:
         """Put the training state on the mesh (seed axis, then environment axis)."""
@@ -162,6 +168,8 @@ class HierarchyTrainer:
         self.host["compile_seconds"] += time.perf_counter() - t0
         final = jax.tree.map(np.asarray, evaluate(*args))
         self.host["wall_seconds"] = time.perf_counter() - t_start
+        if self._tb is not None:
+            self._tb.close()
         return {"levels": self.host["levels"], "curves": self.host["curves"], "final": final,
                 "bank": self.arrays["bank"], "learned": self.arrays["learned"],
                 "wall_seconds": self.host["wall_seconds"],
@@ -228,6 +236,11 @@ class HierarchyTrainer:
                 host["running"][s] = None if math.isnan(run) else run
                 host["curves"].append([seed, plan.level, plan.name, host["episodes"][s],
                                        host["env_steps"][s], host["running"][s]])
+                if self._tb is not None and host["running"][s] is not None:
+                    tag = f"seed_{seed}/level_{plan.level}_{plan.name}"
+                    self._tb.add_scalar(f"{tag}/running_success", host["running"][s],
+                                        host["env_steps"][s])
+                    self._tb.add_scalar(f"{tag}/episodes", host["episodes"][s], host["env_steps"][s])
             # keep only as much history as the window needs
             hist, count, keep = host["history"][s], 0, 0
             for _, c in reversed(hist):

@@ -1,0 +1,48 @@
+"""Non-finite learner parameters stop the run with a clear error and keep the last good
+checkpoint; TensorBoard event files are written on request."""
+import jax
+import jax.numpy as jnp
+import pytest
+
+import smjax.agents as agents
+from hier_env import make_keydoor
+from smjax.train import TrainConfig
+from smjax.train import checkpoint as ckpt
+from smjax.train.loop import NonFiniteError
+from smjax.train.run import run
+
+CFG = dict(num_envs=8, rollout_ticks=8, updates_per_chunk=1, max_episodes_per_level=400,
+           success_window=32, eval_envs=8, checkpoint_every=0.0)
+
+
+def test_nan_injection_stops_cleanly_and_keeps_last_good_checkpoint(tmp_path, monkeypatch):
+    real = agents.make_agent
+
+    def poisoned(algo, **kw):
+        agent = real(algo, **kw)
+
+        def update(state, traj, last_obs, key):
+            new, metrics = agent.update(state, traj, last_obs, key)
+            # after the third update of the first level the parameters go NaN
+            bad = jax.tree.map(lambda p: jnp.where(new.updates >= 3, jnp.nan, p), new.params)
+            return new.replace(params=bad), metrics
+
+        return agent._replace(update=update)
+
+    monkeypatch.setattr(agents, "make_agent", poisoned)
+    out = tmp_path / "run"
+    with pytest.raises(NonFiniteError, match=r"level 1 \(open_door\)"):
+        run(make_keydoor(), TrainConfig(**CFG), [0], out, progress=False)
+    info = ckpt.load_meta(out)
+    assert info is not None and info["meta"]["host"]["chunks"] >= 1
+    # the checkpoint on disk holds finite parameters only
+    step_dir = out / "checkpoints" / info["path"]
+    assert step_dir.exists()
+
+
+def test_tensorboard_event_files(tmp_path):
+    out = tmp_path / "tb"
+    run(make_keydoor(), TrainConfig(**(CFG | {"tensorboard": True, "max_episodes_per_level": 100})),
+        [0], out, progress=False)
+    events = list((out / "tensorboard").glob("events.out.tfevents.*"))
+    assert events and events[0].stat().st_size > 100
