@@ -29,3 +29,11 @@ def choose_uniform(key: jax.Array, mask: jax.Array) -> tuple[jax.Array, jax.Arra
     within = pick - (running[row] - row_counts[row])
     col = jnp.argmax(jnp.cumsum(grid[row]) > within)
     return jnp.where(count > 0, row * cols + col, 0), count
+
+
+def key_words(key: jax.Array) -> jax.Array:
+    """The uint32 words of a typed or raw (uint32) PRNG key, flat (for cheap hash-based
+    random streams that environments derive from a step key)."""
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        key = jax.random.key_data(key)
+    return jnp.asarray(key).reshape(-1).astype(jnp.uint32)

@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from smjax.core.sampling import key_words
 from smjax.envs.craft import constants as C
 
 N = C.GRID_SIZE
@@ -50,13 +51,6 @@ def _fmix32(h: jax.Array) -> jax.Array:
     h = h ^ (h >> 13)
     h = h * np.uint32(0xC2B2AE35)
     return h ^ (h >> 16)
-
-
-def key_words(key: jax.Array) -> jax.Array:
-    """The uint32 words of a typed or raw (uint32) PRNG key."""
-    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        key = jax.random.key_data(key)
-    return jnp.asarray(key, jnp.uint32).reshape(-1)
 
 
 def hash_uniforms(key: jax.Array, n: int) -> jax.Array:

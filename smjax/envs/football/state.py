@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from smjax.core.sampling import key_words
 from smjax.envs.football import constants as C
 
 
@@ -67,10 +68,6 @@ def _mix32(x: jax.Array) -> jax.Array:
     return x ^ (x >> 16)
 
 
-def _key_words(key: jax.Array) -> jax.Array:
-    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        key = jax.random.key_data(key)
-    return jnp.asarray(key).reshape(-1).astype(jnp.uint32)
 
 
 def draw_noise(key: jax.Array) -> Noise:
@@ -84,7 +81,7 @@ def draw_noise(key: jax.Array) -> Noise:
     triangular (sum of two uniforms, scaled to unit variance): the game only needs
     symmetric, bell-shaped noise.
     """
-    words = _key_words(key)
+    words = key_words(key)
     seed_a = words[0]
     seed_b = words[-1] ^ jnp.uint32(0x9E3779B9) * jnp.uint32(words.shape[0])
     width = C.NUM_UNIFORM + 2 * C.NUM_NORMAL          # even: two 16-bit draws per hash
