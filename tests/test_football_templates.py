@@ -55,22 +55,41 @@ def test_initiation_sets():
     assert _init("defend", theirs) and not _init("defend", ours)
 
 
+def _failed(name, state):
+    return bool(TPL[name].failed(state, PARAMS))
+
+
 def test_attack_and_defend_termination():
     ours, theirs = _carrying(0.0, 0.0), _carrying(0.0, 0.0, player=15)
-    assert not _sat("attack", ours) and _sat("attack", theirs)
+    # losing the ball ends the attack without its outcome (no reward for its learner)
+    assert not _sat("attack", ours) and not _failed("attack", ours)
+    assert not _sat("attack", theirs) and _failed("attack", theirs)
     assert _sat("defend", ours) and not _sat("defend", theirs)
     # Our pass in flight: still attacking, not yet defended.
     flying = ours.replace(owner=jnp.int32(-1), pass_receiver=jnp.int32(4))
-    assert not _sat("attack", flying) and _sat("defend", flying)
+    assert not _sat("attack", flying) and not _failed("attack", flying) and _sat("defend", flying)
+
+
+def test_attack_is_satisfied_by_our_goal():
+    # a shot from close range into the empty goal: the tick it goes in, attack is satisfied
+    s = _carrying(0.9, 0.0)
+    step = jax.jit(ENV.step_env)
+    for i in range(30):
+        _, s, reward, _, _, _ = step(jax.random.fold_in(KEY, i), s,
+                                     TPL["shoot"].controller(KEY, s, PARAMS), PARAMS)
+        if float(reward) > 0:
+            break
+    assert float(reward) == 1.0
+    assert _sat("attack", s) and not _failed("attack", s)
 
 
 def test_possession_charge_and_shoot_termination():
     assert not _sat("maintain_possession", _carrying(0.2, 0.0))
     assert _sat("maintain_possession", _carrying(0.55, 0.0))
-    assert _sat("maintain_possession", _carrying(0.0, 0.0, player=15))
+    assert _failed("maintain_possession", _carrying(0.0, 0.0, player=15))
     assert not _sat("charge", _carrying(0.5, 0.0))
     assert _sat("charge", _carrying(0.75, 0.0))
-    assert _sat("charge", _carrying(0.2, 0.0, player=15))
+    assert _failed("charge", _carrying(0.2, 0.0, player=15))
     assert not _sat("shoot", _carrying(0.8, 0.0))
     s = _carrying(0.8, 0.0)
     _, s2, _, _, _, _ = jax.jit(ENV.step_env)(KEY, s, TPL["shoot"].controller(KEY, s, PARAMS), PARAMS)

@@ -128,3 +128,29 @@ def test_frozen_policy_mode_is_validated():
     h = env.hierarchies()["paper"]
     with pytest.raises(ValueError, match="frozen_policy"):
         HierarchyRunner(env, env.default_params, h, fixed_agent(0, 4), gamma=0.9, frozen_policy="best")
+
+
+def test_failed_condition_pops_without_reward():
+    import dataclasses
+
+    from smjax.options import Hierarchy
+    env = KeyDoor()
+    tpls = dict(env.templates())
+    # reach_door as the learner's child, failing after 2 ticks (before the door is reached)
+    tpls["reach_door"] = dataclasses.replace(tpls["reach_door"], failed=lambda s, p: s.t >= 2)
+    h = Hierarchy("open_door", {"open_door": ["reach_door", "use"]}, tpls, env.primitive_action_names)
+    reach = h.action_index("reach_door")
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(reach, h.num_actions), gamma=GAMMA)
+    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False, False]))
+    carry = runner.reset(jax.random.PRNGKey(0), controls, B)
+    carry = carry.replace(env_state=carry.env_state.replace(
+        pos=jnp.zeros((B,), jnp.int32), door_pos=jnp.full((B,), 7)))
+    bank = jnp.zeros((2, h.num_actions))
+    depths = []
+    for t in range(3):
+        carry, tr, _ = runner.tick(carry, jax.random.PRNGKey(t), None, bank, controls)
+        depths.append(int(carry.stack.depth[0]))
+        assert float(tr.reward.sum()) == 0.0
+    # pushed; popped by `failed` once t = 2; called again, it fails again at once
+    assert depths == [2, 1, 1]
+    assert (np.asarray(carry.env_state.pos) == 3).all()  # its controller still walked each tick

@@ -130,6 +130,12 @@ class HierarchyRunner:
         vals = [jnp.asarray(False)] + [t.satisfied(state, self.env_params) for t in self.templates]
         return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
 
+    def _failed(self, state) -> jax.Array:
+        vals = [jnp.asarray(False)] + [
+            t.failed(state, self.env_params) if t.failed is not None else jnp.asarray(False)
+            for t in self.templates]
+        return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
+
     def _initiation(self, state) -> jax.Array:
         vals = [jnp.asarray(True)] + [t.initiation(state, self.env_params) for t in self.templates]
         return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
@@ -232,9 +238,12 @@ class HierarchyRunner:
         # pops: the lowest entry that is satisfied or out of ticks ends, with all above it
         stack = jax.vmap(stack_tick)(stack)
         sat = jax.vmap(self._satisfied)(state)                                   # [B, O]
+        stop = sat
+        if any(t.failed is not None for t in self.templates):
+            stop = sat | jax.vmap(self._failed)(state)
         opt = jnp.maximum(stack.option, 0)
         live = jnp.arange(self.D)[None, :] < stack.depth[:, None]
-        ended = live & (jnp.take_along_axis(sat, opt, 1) | (stack.steps >= self.k_max[opt]))
+        ended = live & (jnp.take_along_axis(stop, opt, 1) | (stack.steps >= self.k_max[opt]))
         first_end = jnp.where(ended.any(1), jnp.argmax(ended, 1), self.D)
         learner_on = jax.vmap(stack_contains, (0, None))(stack, controls.learner)
         learner_pos = jnp.argmax(stack.option == controls.learner, 1)

@@ -61,6 +61,9 @@ class OptionTemplate:
       satisfied: F_o, True when the template's outcome holds.
       k_max: tick budget; an option running this long is popped (T = F_o or k > k_max).
       initiation: I; calls outside it are masked out of the caller's choices.
+      failed: optional condition that ends the option *without* its outcome (e.g. "the
+        ball was lost" for an attack): the option pops, but a learner of this template
+        earns nothing for it. Termination is satisfied or failed or k_max.
       teleport: realisation by jumping to an outcome (one tick), or None.
       controller: scripted realisation (runs until satisfied or k_max), or None.
       nominal_steps: d, the duration a teleported call stands for; the caller's SMDP
@@ -72,6 +75,7 @@ class OptionTemplate:
     satisfied: StateFn
     k_max: int
     initiation: StateFn = always
+    failed: Optional[StateFn] = None
     teleport: Optional[TeleportFn] = None
     controller: Optional[ControllerFn] = None
     nominal_steps: int = 1

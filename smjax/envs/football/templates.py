@@ -154,17 +154,37 @@ def defend_controller(key: jax.Array, state: FootballState, params) -> jax.Array
 
 
 # ---- conditions ----------------------------------------------------------------
+def we_just_scored(state: FootballState) -> jax.Array:
+    """The tick our goal went in: the opponents are set to kick off, timer at 0 (their
+    kick-offs happen only after our goals; the match starts with ours)."""
+    return (state.game_mode == C.KICK_OFF) & (state.mode_timer == 0) & right_controls(state)
+
+
 def attack_satisfied(state: FootballState, params) -> jax.Array:
-    return right_controls(state)
+    """F_o of "attack and score": we scored."""
+    return we_just_scored(state)
+
+
+def attack_failed(state: FootballState, params) -> jax.Array:
+    """The attack ends without its outcome when the opponents win the ball."""
+    return right_controls(state) & ~we_just_scored(state)
 
 
 def possession_satisfied(state: FootballState, params) -> jax.Array:
-    return (left_controls(state) & (state.pos[_carrier(state), 0] >= 0.5)) | right_controls(state)
+    return left_controls(state) & (state.pos[_carrier(state), 0] >= 0.5)
+
+
+def possession_failed(state: FootballState, params) -> jax.Array:
+    return right_controls(state)
 
 
 def charge_satisfied(state: FootballState, params) -> jax.Array:
     near = norm2(state.pos[_carrier(state)] - GOAL) <= 0.3
-    return (left_controls(state) & near) | ~left_controls(state)
+    return left_controls(state) & near
+
+
+def charge_failed(state: FootballState, params) -> jax.Array:
+    return ~left_controls(state)
 
 
 def defend_satisfied(state: FootballState, params) -> jax.Array:
@@ -184,20 +204,22 @@ def _we_control(state, params):
 
 
 def make_templates() -> dict[str, OptionTemplate]:
+    # (name, satisfied = F_o, failed = ends without the outcome, initiation, controller, doc)
     specs = [
-        ("attack", attack_satisfied, _we_have, attack_controller, "attack and score"),
-        ("defend", defend_satisfied, _we_do_not_have, defend_controller,
+        ("attack", attack_satisfied, attack_failed, _we_have, attack_controller,
+         "attack and score (fails when the ball is lost)"),
+        ("defend", defend_satisfied, None, _we_do_not_have, defend_controller,
          "built-in defence until the ball is won"),
-        ("maintain_possession", possession_satisfied, _we_have, maintain_possession_controller,
-         "dribble into space or pass safely until x >= 0.5"),
-        ("charge", charge_satisfied, _we_control, charge_controller,
+        ("maintain_possession", possession_satisfied, possession_failed, _we_have,
+         maintain_possession_controller, "dribble into space or pass safely until x >= 0.5"),
+        ("charge", charge_satisfied, charge_failed, _we_control, charge_controller,
          "carrier sprints toward the goal until within 0.3"),
-        ("shoot", lambda s, p: ~left_controls(s), _we_control, shoot_controller, "shoot at goal"),
+        ("shoot", lambda s, p: ~left_controls(s), None, _we_control, shoot_controller, "shoot at goal"),
     ]
     return {
-        name: OptionTemplate(name=name, satisfied=sat, k_max=K_MAX, initiation=init,
+        name: OptionTemplate(name=name, satisfied=sat, failed=fail, k_max=K_MAX, initiation=init,
                              controller=ctrl, description=desc)
-        for name, sat, init, ctrl, desc in specs
+        for name, sat, fail, init, ctrl, desc in specs
     }
 
 
