@@ -66,6 +66,9 @@ def _add_train(sub):
     p.add_argument("--num-envs", type=int, default=None, help="parallel environments per seed")
     p.add_argument("--threshold", type=float, default=None, help="success threshold per level (0, 1]")
     p.add_argument("--max-episodes", type=int, default=None, help="episode budget per level")
+    p.add_argument("--max-steps", type=int, default=None,
+                   help="env-step budget per level (0: none); per-template budgets and thresholds: "
+                        "--set 'levels={\"attack\": {\"max_steps_per_level\": 1500000}}'")
     p.add_argument("--fixed-map", action="store_true", help="Craft: one fixed map per run (the paper's setting)")
     p.add_argument("--tensorboard", action="store_true", help="also write TensorBoard event files to OUT/tensorboard")
     p.add_argument("--quiet", action="store_true", help="no progress bars; print only the summary line")
@@ -94,7 +97,8 @@ def _cmd_train(args) -> int:
     data.update(_key_values(args.set, "--set"))
     for field, value in (("method", args.method), ("algo", args.algo), ("hierarchy", args.hierarchy),
                          ("num_envs", args.num_envs), ("threshold", args.threshold),
-                         ("max_episodes_per_level", args.max_episodes)):
+                         ("max_episodes_per_level", args.max_episodes),
+                         ("max_steps_per_level", args.max_steps)):
         if value is not None:
             data[field] = value
     if args.tensorboard:

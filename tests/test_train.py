@@ -95,3 +95,27 @@ def test_craft_get_wood_reaches_threshold_on_cpu():
     level = res["levels"][0]
     assert level["reached"] == [True] and level["final_running_success"][0] >= 0.8
     assert res["final_success"][0] > 0.6  # the learned policy alone, fresh maps
+
+
+def test_per_level_budgets_and_thresholds():
+    # open_door may not end before 10 updates' worth of steps (threshold 1.0 is unreachable
+    # with a stochastic policy); give_key stops at its own, smaller step budget
+    steps_per_update = SMALL["num_envs"] * SMALL["rollout_ticks"]
+    cfg = TrainConfig(**(SMALL | {"max_steps_per_level": 10 * steps_per_update, "threshold": 1.0,
+                                   "levels": {"give_key": {"max_steps_per_level": 4 * steps_per_update}}}))
+    res = run(make_keydoor(), cfg, [0], progress=False)
+    steps = {lvl["template"]: lvl["env_steps"][0] for lvl in res["levels"]}
+    per_chunk = steps_per_update * SMALL["updates_per_chunk"]
+    assert steps == {"open_door": 3 * per_chunk, "give_key": per_chunk}
+
+
+def test_per_level_overrides_are_checked():
+    with pytest.raises(ConfigError, match="unknown field"):
+        TrainConfig(levels={"give_key": {"gamma": 0.5}})
+    with pytest.raises(ConfigError, match="threshold"):
+        TrainConfig(levels={"give_key": {"threshold": 2.0}})
+    with pytest.raises(ConfigError, match="does not train"):
+        run(make_keydoor(), TrainConfig(**(SMALL | {"levels": {"give_kee": {"threshold": 0.5}}})), [0],
+            progress=False)
+    with pytest.raises(ConfigError, match="max_steps_per_level"):
+        TrainConfig(max_steps_per_level=-1)

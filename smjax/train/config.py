@@ -10,6 +10,8 @@ from typing import Any
 METHODS = ("top-down", "bottom-up", "flat")
 ALGOS = ("ppo", "dqn", "actor-critic")
 FROZEN_POLICIES = ("auto", "greedy", "sample")
+# what ``TrainConfig.levels`` may override per template
+LEVEL_FIELDS = ("threshold", "max_episodes_per_level", "max_steps_per_level", "success_window")
 
 
 class ConfigError(ValueError):
@@ -32,6 +34,12 @@ class TrainConfig:
       threshold: a level ends when its running success reaches this (the paper: 0.8).
       success_window: number of recent learner episodes the running success averages.
       max_episodes_per_level: the level's budget L (environment episodes).
+      max_steps_per_level: a second budget in environment steps (0: none); a level ends at
+        whichever budget it meets first. Env-step budgets compare methods fairly when
+        episodes differ in length (football games, Fetch).
+      levels: per-template overrides, e.g. ``{"attack": {"threshold": 0.3,
+        "max_steps_per_level": 1_500_000}}``; keys are template names of the hierarchy
+        (checked when training starts) and values override ``LEVEL_FIELDS``.
       gamma: discount per primitive tick (gamma**d for a teleported call of duration d).
       frozen_policy: how trained options act when frozen (auto: greedy for dqn, else sample).
       eval_envs: episodes run (one per environment) to measure final_success.
@@ -51,6 +59,7 @@ class TrainConfig:
     threshold: float = 0.8
     success_window: int = 256
     max_episodes_per_level: int = 40_000
+    max_steps_per_level: int = 0
     gamma: float = 0.99
     frozen_policy: str = "auto"
     eval_envs: int = 256
@@ -58,6 +67,7 @@ class TrainConfig:
     checkpoint_every: float = 60.0
     tensorboard: bool = False
     agent: dict = field(default_factory=dict)
+    levels: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.validate()
@@ -83,6 +93,28 @@ class TrainConfig:
              "checkpoint_every", ">= 0 seconds")
         need(isinstance(self.tensorboard, bool), "tensorboard", "true or false")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
+        need(isinstance(self.max_steps_per_level, int) and not isinstance(self.max_steps_per_level, bool)
+             and self.max_steps_per_level >= 0, "max_steps_per_level", "an integer >= 0 (0: no step budget)")
+        need(isinstance(self.levels, dict) and all(isinstance(k, str) and isinstance(v, dict)
+                                                   for k, v in self.levels.items()),
+             "levels", "a mapping of template name -> {field: value}")
+        for name, fields in self.levels.items():
+            unknown = sorted(set(fields) - set(LEVEL_FIELDS), key=repr)
+            if unknown:
+                raise ConfigError(f"config field 'levels' for template {name!r}: unknown field(s) "
+                                  f"{unknown}; per-level fields: {list(LEVEL_FIELDS)}")
+            dataclasses.replace(self, levels={}, **fields)  # validates the override values
+
+    def for_level(self, template: str) -> "TrainConfig":
+        """The config a level trains with: this one plus ``levels[template]``'s overrides."""
+        return dataclasses.replace(self, levels={}, **self.levels.get(template, {}))
+
+    def check_level_names(self, names) -> None:
+        """Refuse overrides for templates the run does not train (a typo would be silent)."""
+        unknown = sorted(set(self.levels) - set(names))
+        if unknown:
+            raise ConfigError(f"config field 'levels' names {unknown}, which this run does not "
+                              f"train; trained templates: {list(names)}")
 
     def replace(self, **changes: Any) -> "TrainConfig":
         return dataclasses.replace(self, **changes)

@@ -95,6 +95,7 @@ class HierarchyTrainer:
                  out_dir=None, progress: bool = True, run_meta: dict | None = None):
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
         self.cfg = engine.cfg
+        self.cfg.check_level_names([p.name for p in plans])
         self.out_dir, self.progress = out_dir, progress
         self.run_meta = run_meta or {}
         S = len(self.seeds)
@@ -222,7 +223,7 @@ class HierarchyTrainer:
             bar.close()
 
     def _account(self, plan: LevelPlan, stats, steps_per_update: int) -> None:
-        cfg, host = self.cfg, self.host
+        cfg, host = self.cfg.for_level(plan.name), self.host
         for s, seed in enumerate(self.seeds):
             if not host["active"][s]:
                 continue
@@ -251,7 +252,8 @@ class HierarchyTrainer:
             run = host["running"][s]
             if run is not None and run >= cfg.threshold:
                 host["reached"][s], host["active"][s] = True, False
-            elif host["episodes"][s] >= cfg.max_episodes_per_level:
+            elif host["episodes"][s] >= cfg.max_episodes_per_level or (
+                    cfg.max_steps_per_level and host["env_steps"][s] >= cfg.max_steps_per_level):
                 host["active"][s] = False
 
     def _finish_level(self, plan: LevelPlan) -> None:
@@ -274,12 +276,13 @@ class HierarchyTrainer:
             return None
         from tqdm.auto import tqdm
 
-        return tqdm(total=self.cfg.max_episodes_per_level, desc=f"level {plan.level} {plan.name}",
+        self._bar_total = self.cfg.for_level(plan.name).max_episodes_per_level
+        return tqdm(total=self._bar_total, desc=f"level {plan.level} {plan.name}",
                     unit="ep", leave=True, initial=int(np.mean(self.host["episodes"])))
 
     def _draw(self, bar, dt: float, steps_per_update: int) -> None:
         host = self.host
-        bar.n = int(min(np.mean(host["episodes"]), self.cfg.max_episodes_per_level))
+        bar.n = int(min(np.mean(host["episodes"]), self._bar_total))
         rate = self.cfg.updates_per_chunk * steps_per_update * len(self.seeds) / max(dt, 1e-9)
         runs = [r for r in host["running"] if r is not None]
         bar.set_postfix(success=f"{np.mean(runs) if runs else 0:.2f}",
