@@ -21,6 +21,10 @@ Examples:
   smjax train craft/get_wood --seeds 2 --out runs/wood
   smjax train craft/get_gem --method top-down --algo ppo --seeds 10 --out runs/gem
   smjax bench craft/get_gem --num-envs 4096 --steps 200
+
+Several hosts (run the same command on each, changing --process-id):
+  smjax train craft/get_gem --seeds 16 --out runs/gem --coordinator 10.0.0.1:1234 \
+      --num-processes 2 --process-id 0
 """
 
 
@@ -72,6 +76,39 @@ def _add_train(sub):
     p.add_argument("--fixed-map", action="store_true", help="Craft: one fixed map per run (the paper's setting)")
     p.add_argument("--tensorboard", action="store_true", help="also write TensorBoard event files to OUT/tensorboard")
     p.add_argument("--quiet", action="store_true", help="no progress bars; print only the summary line")
+    _add_distributed(p)
+
+
+def _add_distributed(p) -> None:
+    g = p.add_argument_group(
+        "several processes / hosts (jax.distributed)",
+        "Start the same command once per process; all of them train together. Unset values "
+        "come from JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID. Only process 0 "
+        "writes (results, checkpoints, plots) and prints; --out is on process 0's disk.")
+    g.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                   help="address of process 0 (reachable from every process)")
+    g.add_argument("--num-processes", type=int, default=None, metavar="N", help="processes in the run")
+    g.add_argument("--process-id", type=int, default=None, metavar="I", help="this process, 0..N-1")
+    g.add_argument("--local-device-ids", default=None, metavar="IDS",
+                   help="comma-separated local device ids this process uses (e.g. one GPU each: 0 / 1)")
+    g.add_argument("--cluster", nargs="?", const=True, default=False, metavar="METHOD",
+                   help="let JAX detect unset values from the cluster (SLURM, Open MPI, ...); "
+                        "optionally name the method, e.g. mpi4py")
+
+
+def _initialize_distributed(args) -> None:
+    """Join the multi-process run the flags / environment describe (nothing for one process)."""
+    from smjax.train.distributed import initialize
+
+    ids = None
+    if args.local_device_ids:
+        try:
+            ids = [int(x) for x in args.local_device_ids.split(",")]
+        except ValueError:
+            raise ValueError(f"--local-device-ids must be comma-separated integers, "
+                             f"got {args.local_device_ids!r}") from None
+    initialize(args.coordinator, args.num_processes, args.process_id, local_device_ids=ids,
+               auto_detect=args.cluster)
 
 
 def _cmd_train(args) -> int:
@@ -79,10 +116,16 @@ def _cmd_train(args) -> int:
     from smjax.train.run import run
 
     from smjax.train import checkpoint as ckpt
+    from smjax.train.distributed import is_writer
 
+    try:  # before anything touches JAX
+        _initialize_distributed(args)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     saved = None
     if args.resume:
-        info = ckpt.load_meta(args.resume)
+        info = ckpt.shared_meta(args.resume)
         if info is None:
             print(f"error: nothing to resume: no checkpoint in {args.resume}", file=sys.stderr)
             return 2
@@ -128,6 +171,8 @@ def _cmd_train(args) -> int:
     except (KeyError, ValueError, TypeError, FileExistsError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if not is_writer():  # process 0 reports for the whole run
+        return 0
     summary = {k: results[k] for k in ("env", "task", "method", "algo", "episodes_to_threshold",
                                        "final_success", "wall_seconds", "compile_seconds")}
     print(json.dumps(summary))

@@ -22,6 +22,7 @@ import numpy as np
 
 from smjax.options.hierarchy import Hierarchy
 from smjax.train import checkpoint as ckpt
+from smjax.train import distributed as dist
 from smjax.train.config import TrainConfig
 from smjax.train.engine import Engine, SeedState
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
@@ -83,9 +84,22 @@ def _split_seeds(keys: jax.Array, n: int) -> list[jax.Array]:
     return [split[:, i] for i in range(n)]
 
 
+@jax.jit
+def _finite_flags(tree) -> jax.Array:
+    flags = [jnp.isfinite(x).all() for x in jax.tree.leaves(tree)
+             if jnp.issubdtype(x.dtype, jnp.floating)]
+    return jnp.stack(flags).all() if flags else jnp.asarray(True)
+
+
 def _all_finite(tree) -> bool:
-    return all(bool(jnp.isfinite(x).all()) for x in jax.tree.leaves(tree)
-               if jnp.issubdtype(x.dtype, jnp.floating))
+    # one compiled reduction, read through ``gather`` so every process sees the same answer
+    return bool(dist.gather(_finite_flags(tree)))
+
+
+def _local(x: jax.Array) -> jax.Array:
+    """``x`` as an array this process holds whole (host-side derivations such as key
+    splits and learner inits work on it; they are then placed on the mesh again)."""
+    return x if x.is_fully_addressable else jnp.asarray(dist.gather(x))
 
 
 class HierarchyTrainer:
@@ -96,7 +110,9 @@ class HierarchyTrainer:
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
         self.cfg = engine.cfg
         self.cfg.check_level_names([p.name for p in plans])
-        self.out_dir, self.progress = out_dir, progress
+        self.out_dir = out_dir
+        self.writer = dist.is_writer()  # process 0: the only one that writes files or draws bars
+        self.progress = progress and self.writer
         self.run_meta = run_meta or {}
         S = len(self.seeds)
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
@@ -117,7 +133,7 @@ class HierarchyTrainer:
         self.mesh = training_mesh(S, self.cfg.num_envs)
         self._place()
         self._tb = None
-        if self.cfg.tensorboard and out_dir is not None:
+        if self.cfg.tensorboard and out_dir is not None and self.writer:
             from tensorboardX import SummaryWriter
 
             self._tb = SummaryWriter(str(Path(out_dir) / "tensorboard"))
@@ -127,26 +143,36 @@ class HierarchyTrainer:
         if self.mesh is None:
             return
         arrays = self.arrays
-        self.arrays = {
-            "keys": jax.device_put(arrays["keys"], seed_sharding(self.mesh, arrays["keys"])),
-            "state": jax.device_put(arrays["state"], state_shardings(self.mesh, arrays["state"])),
-            "bank": jax.device_put(arrays["bank"], seed_sharding(self.mesh, arrays["bank"])),
-            "learned": jax.device_put(arrays["learned"], seed_sharding(self.mesh, arrays["learned"])),
+        shardings = {
+            "keys": seed_sharding(self.mesh, arrays["keys"]),
+            "state": state_shardings(self.mesh, arrays["state"]),
+            "bank": seed_sharding(self.mesh, arrays["bank"]),
+            "learned": seed_sharding(self.mesh, arrays["learned"]),
         }
+        self.arrays = dist.place(arrays, shardings)
 
     # ---- checkpoints -------------------------------------------------------------
     def save(self) -> None:
+        """Checkpoint (collective with several processes: all gather, process 0 writes)."""
         if self.out_dir is None:
             return
         meta = {"host": self.host, "run": self.run_meta}
-        ckpt.save_checkpoint(self.out_dir, self.host["chunks"], self.arrays, meta)
+        arrays = dist.gather(self.arrays) if dist.is_multiprocess() else self.arrays
+        if self.writer:
+            ckpt.save_checkpoint(self.out_dir, self.host["chunks"], arrays, meta)
         self._last_save = time.perf_counter()
 
     def restore(self) -> bool:
-        info = ckpt.load_meta(self.out_dir) if self.out_dir is not None else None
+        """Resume from process 0's checkpoint; every process gets the same state."""
+        info = ckpt.shared_meta(self.out_dir) if self.out_dir is not None else None
         if info is None:
             return False
-        self.arrays = ckpt.load_arrays(self.out_dir, self.arrays)
+        if dist.is_multiprocess():
+            like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), self.arrays)
+            loaded = ckpt.load_arrays(self.out_dir, like) if self.writer else like
+            self.arrays = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
+        else:
+            self.arrays = ckpt.load_arrays(self.out_dir, self.arrays)
         self.host = info["meta"]["host"]
         self._place()
         return True
@@ -162,12 +188,14 @@ class HierarchyTrainer:
             self._finish_level(plan)
             self.host["wall_seconds"] = time.perf_counter() - t_start
             self.save()
-        keys, k_eval = _split_seeds(self.arrays["keys"], 2)
+        keys, k_eval = _split_seeds(_local(self.arrays["keys"]), 2)
+        if self.mesh is not None:
+            k_eval = dist.place(k_eval, seed_sharding(self.mesh, k_eval))
         t0 = time.perf_counter()
         args = (k_eval, self.arrays["bank"], self.arrays["learned"], self.arrays["state"].learner)
         evaluate = self.engine.evaluate.lower(*args).compile()
         self.host["compile_seconds"] += time.perf_counter() - t0
-        final = jax.tree.map(np.asarray, evaluate(*args))
+        final = dist.gather(evaluate(*args))
         self.host["wall_seconds"] = time.perf_counter() - t_start
         if self._tb is not None:
             self._tb.close()
@@ -178,7 +206,7 @@ class HierarchyTrainer:
 
     def _start_level(self, plan: LevelPlan) -> None:
         S = len(self.seeds)
-        keys, k_init, k_reset, k_run = _split_seeds(self.arrays["keys"], 4)
+        keys, k_init, k_reset, k_run = _split_seeds(_local(self.arrays["keys"]), 4)
         learner = self.engine.init_learner(k_init)
         carry = self.engine.reset(k_reset, jnp.asarray(plan.start))
         self.arrays["keys"] = keys
@@ -192,10 +220,14 @@ class HierarchyTrainer:
         steps_per_update = cfg.num_envs * cfg.rollout_ticks
         bar = self._bar(plan)
         learner_arr, start_arr = jnp.asarray(plan.option), jnp.asarray(plan.start)
+        if self.mesh is not None and dist.is_multiprocess():
+            # every input of the compiled chunk must be global when it spans processes
+            learner_arr, start_arr = dist.place((learner_arr, start_arr),
+                                                seed_sharding(self.mesh, (learner_arr, start_arr)))
         while any(host["active"]):
             active = jnp.asarray(host["active"])
             if self.mesh is not None:
-                active = jax.device_put(active, seed_sharding(self.mesh, active))
+                active = dist.place(active, seed_sharding(self.mesh, active))
             args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
                     learner_arr, start_arr)
             if self._compiled is None:  # one compile serves every level (ids are traced)
@@ -204,7 +236,7 @@ class HierarchyTrainer:
                 host["compile_seconds"] += time.perf_counter() - t0
             t0 = time.perf_counter()
             state, stats, _ = self._compiled(*args)
-            stats = jax.tree.map(np.asarray, stats)  # [S, U]
+            stats = dist.gather(stats)  # [S, U], the same on every process
             dt = time.perf_counter() - t0
             if not _all_finite(state.learner.params):
                 raise NonFiniteError(
@@ -217,10 +249,15 @@ class HierarchyTrainer:
             host["wall_seconds"] = time.perf_counter() - t_start
             if bar is not None:
                 self._draw(bar, dt, steps_per_update)
-            if self.out_dir is not None and time.perf_counter() - self._last_save >= cfg.checkpoint_every:
+            if self.out_dir is not None and self._save_due():
                 self.save()
         if bar is not None:
             bar.close()
+
+    def _save_due(self) -> bool:
+        due = time.perf_counter() - self._last_save >= self.cfg.checkpoint_every
+        # clocks differ between processes, and saving is collective: process 0 decides
+        return dist.agree(due) if self.cfg.checkpoint_every > 0 else due
 
     def _account(self, plan: LevelPlan, stats, steps_per_update: int) -> None:
         cfg, host = self.cfg.for_level(plan.name), self.host

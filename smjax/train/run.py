@@ -6,6 +6,7 @@ from typing import Any
 
 from smjax.core.registry import make
 from smjax.train import checkpoint as ckpt
+from smjax.train import distributed as dist
 from smjax.train.config import ConfigError, TrainConfig, config_differences
 from smjax.train.engine import Engine
 from smjax.train.loop import HierarchyTrainer, plan_levels, resolve_hierarchy
@@ -31,7 +32,7 @@ def run_identity(task_name: str, cfg: TrainConfig, seeds: list[int], env_overrid
 
 def check_resumable(out_dir, identity: dict) -> bool:
     """True if ``out_dir`` holds a checkpoint of this very run; refuse a different one."""
-    info = ckpt.load_meta(out_dir)
+    info = ckpt.shared_meta(out_dir)
     if info is None:
         return False
     saved = info["meta"]["run"]
@@ -49,7 +50,9 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
     for environments you define yourself. Returns the results dict (DESIGN.md section 6);
     with ``out_dir`` also writes results.json, curves.csv, curves.png and checkpoints
-    there. ``resume=True`` continues from ``out_dir``'s last checkpoint; a checkpoint of
+    there. With several processes (``smjax.train.distributed.initialize`` called first,
+    every process running this same call) they train together and only process 0 reads
+    and writes ``out_dir``. ``resume=True`` continues from ``out_dir``'s last checkpoint; a checkpoint of
     a different configuration is refused (the error names the differing fields).
     """
     from smjax.agents import make_agent
@@ -62,13 +65,15 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     else:
         env, env_params = task
     identity = run_identity(env.name, cfg, seeds, env_overrides)
+    # with several processes process 0's view of out_dir decides, so all raise alike
+    existing = ckpt.shared_meta(out_dir) if out_dir is not None else None
     if resume:
         if out_dir is None:
             raise ValueError("resume needs the run's output directory")
-        if ckpt.load_meta(out_dir) is None:
+        if existing is None:
             raise FileNotFoundError(f"nothing to resume: no checkpoint in {ckpt.checkpoint_dir(out_dir)}")
         check_resumable(out_dir, identity)
-    elif out_dir is not None and ckpt.load_meta(out_dir) is not None:
+    elif existing is not None:
         raise FileExistsError(
             f"{out_dir} already holds a checkpointed run; pass resume (--resume) to continue it "
             f"or choose another output directory")
@@ -82,7 +87,7 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     raw = trainer.run()
     config = cfg.to_dict() | {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides}
     results = build_results(env.name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config)
-    if out_dir is not None:
+    if out_dir is not None and dist.is_writer():
         write_results(out_dir, results, raw["curves"])
     results_with_raw: dict[str, Any] = dict(results)
     results_with_raw["_raw"] = raw

@@ -1,0 +1,180 @@
+"""Several processes joined with jax.distributed (on 127.0.0.1, CPU, gloo) train together.
+
+Two processes with 2 virtual CPU devices each form a 4-device mesh; 4 seeds give
+seed-only sharding (one seed per device), so the numbers are bitwise those of one
+process with 4 virtual devices (and of 1 device: see test_sharding.py). Process 0
+writes everything; process 1 runs in an empty working directory with its own --out and
+must leave both untouched. A two-process run killed mid-level resumes (every process
+restoring process 0's checkpoint) to the same results.
+"""
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from smjax.train import distributed as dist
+
+TESTS = str(Path(__file__).parent)
+CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=400,
+           success_window=64, eval_envs=32)
+SCRIPT = """
+import sys
+sys.path.insert(0, {tests!r})
+from smjax.train import distributed
+joined = distributed.initialize(initialization_timeout=60)
+import jax
+from hier_env import make_keydoor
+from smjax.train import TrainConfig
+from smjax.train.run import run
+assert joined == (jax.process_count() > 1)
+run(make_keydoor(), TrainConfig(**{cfg!r}), [0, 1, 2, 3], {out!r}, progress=False, resume={resume!r})
+"""
+TIMING = ("wall_seconds", "compile_seconds")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _start(out: Path, cwd: Path, devices: int, cfg: dict, resume: bool = False,
+           process: tuple[int, int, int] | None = None) -> subprocess.Popen:
+    """One training process; ``process`` = (port, num_processes, process_id) joins a run."""
+    env = dict(os.environ, JAX_PLATFORMS="cpu",
+               XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
+    for name in (dist.ENV_COORDINATOR, dist.ENV_NUM_PROCESSES, dist.ENV_PROCESS_ID):
+        env.pop(name, None)
+    if process is not None:
+        port, n, i = process
+        env.update({dist.ENV_COORDINATOR: f"127.0.0.1:{port}", dist.ENV_NUM_PROCESSES: str(n),
+                    dist.ENV_PROCESS_ID: str(i)})
+    cwd.mkdir(parents=True, exist_ok=True)
+    code = SCRIPT.format(tests=TESTS, cfg=cfg, out=str(out), resume=resume)
+    return subprocess.Popen([sys.executable, "-c", code], env=env, cwd=cwd,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _wait(procs: list[subprocess.Popen], timeout: float = 300) -> None:
+    for proc in procs:
+        out, _ = proc.communicate(timeout=timeout)
+        assert proc.returncode == 0, out[-3000:]
+
+
+def _pair(tmp: Path, out0: Path, cfg: dict, resume: bool = False) -> list[subprocess.Popen]:
+    port = _free_port()
+    return [_start(out0, tmp / "cwd0", 2, cfg, resume, (port, 2, 0)),
+            _start(tmp / "p1_out", tmp / "cwd1", 2, cfg, resume, (port, 2, 1))]
+
+
+def _results(out: Path) -> dict:
+    return {k: v for k, v in json.loads((out / "results.json").read_text()).items() if k not in TIMING}
+
+
+def test_two_processes_equal_one_process(tmp_path):
+    single = _start(tmp_path / "single", tmp_path / "cwd", 4, CFG)
+    _wait([single])
+    procs = _pair(tmp_path, tmp_path / "multi", CFG)
+    _wait(procs)
+    one, two = _results(tmp_path / "single"), _results(tmp_path / "multi")
+    assert [lvl["template"] for lvl in two["levels"]] == ["open_door", "give_key"]
+    assert two["levels"] == one["levels"]
+    assert two["final_success"] == one["final_success"]
+    assert two == one
+    assert (tmp_path / "multi" / "curves.csv").read_text() == (tmp_path / "single" / "curves.csv").read_text()
+    assert (tmp_path / "multi" / "checkpoints" / "latest.json").exists()
+    # process 1 wrote nothing: neither its --out nor anything in its working directory
+    assert not (tmp_path / "p1_out").exists()
+    assert list((tmp_path / "cwd1").iterdir()) == []
+
+
+@pytest.mark.slow
+def test_two_processes_killed_then_resumed_equal_uninterrupted(tmp_path):
+    cfg = CFG | {"max_episodes_per_level": 1500, "checkpoint_every": 0.0}
+    straight = _start(tmp_path / "straight", tmp_path / "cwd", 4, cfg)
+    _wait([straight])
+    out = tmp_path / "killed"
+    procs = _pair(tmp_path, out, cfg)
+    latest, deadline = out / "checkpoints" / "latest.json", time.time() + 240
+    while time.time() < deadline:  # a few checkpoints in, kill both mid-level
+        if latest.exists() and json.loads(latest.read_text())["step"] >= 3:
+            break
+        if any(p.poll() is not None for p in procs):
+            pytest.fail("training ended before it could be killed; lengthen the run")
+        time.sleep(0.05)
+    for p in procs:
+        p.send_signal(signal.SIGKILL)
+        p.wait()
+    assert not (out / "results.json").exists()
+    _wait(_pair(tmp_path, out, cfg, resume=True))
+    assert _results(out) == _results(tmp_path / "straight")
+    assert not (tmp_path / "p1_out").exists()
+
+
+# ---- initialize: single process and bad input -----------------------------------------------
+@pytest.fixture
+def clean_env(monkeypatch):
+    for name in (dist.ENV_COORDINATOR, dist.ENV_NUM_PROCESSES, dist.ENV_PROCESS_ID):
+        monkeypatch.delenv(name, raising=False)
+    return monkeypatch
+
+
+def test_single_process_does_nothing(clean_env):
+    assert dist.initialize() is False
+    assert dist.initialize(num_processes=1) is False
+    assert dist.initialize("127.0.0.1:1234", 1, 0) is False
+    assert dist.is_writer() and not dist.is_multiprocess()
+
+
+@pytest.mark.parametrize("args, message", [
+    (("127.0.0.1:1234", 2, 2), r"process_id must be in 0\.\.1"),
+    (("127.0.0.1:1234", 2, -1), "process_id must be >= 0"),
+    (("127.0.0.1:1234", 0, 0), "num_processes must be >= 1"),
+    (("127.0.0.1", 2, 0), "HOST:PORT"),
+    (("127.0.0.1:http", 2, 0), "HOST:PORT"),
+    (("127.0.0.1:70000", 2, 0), "port must be in 1..65535"),
+    ((":1234", 2, 0), "HOST:PORT"),
+    ((None, 2, 0), "missing coordinator"),
+    (("127.0.0.1:1234", None, 1), "missing num_processes"),
+    (("127.0.0.1:1234", 2, None), "missing process_id"),
+    ((None, 1, 1), r"process_id must be in 0\.\.0"),
+])
+def test_bad_arguments_are_refused(clean_env, args, message):
+    with pytest.raises(ValueError, match=message):
+        dist.initialize(*args)
+
+
+def test_environment_variables_are_read_and_checked(clean_env):
+    clean_env.setenv(dist.ENV_NUM_PROCESSES, "two")
+    with pytest.raises(ValueError, match="JAX_NUM_PROCESSES.*'two'"):
+        dist.initialize()
+    clean_env.setenv(dist.ENV_NUM_PROCESSES, "2")
+    clean_env.setenv(dist.ENV_PROCESS_ID, "5")
+    with pytest.raises(ValueError, match=r"process_id must be in 0\.\.1"):
+        dist.initialize()
+    clean_env.setenv(dist.ENV_PROCESS_ID, "1")
+    clean_env.setenv(dist.ENV_COORDINATOR, "host-without-port")
+    with pytest.raises(ValueError, match="HOST:PORT"):
+        dist.initialize()
+    assert dist.resolve("[::1]:8476", None, None)[0] == "[::1]:8476"
+    clean_env.setenv(dist.ENV_COORDINATOR, "node-1.cluster:8476")
+    assert dist.resolve() == ("node-1.cluster:8476", 2, 1)
+    # explicit values win over the environment
+    assert dist.resolve("10.0.0.1:99", 4, 3) == ("10.0.0.1:99", 4, 3)
+
+
+def test_cli_reports_bad_distributed_flags(clean_env, capsys):
+    from smjax.cli import main
+
+    assert main(["train", "craft/get_wood", "--coordinator", "127.0.0.1:1234",
+                 "--num-processes", "2", "--process-id", "3"]) == 2
+    assert "process_id must be in 0..1" in capsys.readouterr().err
+    assert main(["train", "craft/get_wood", "--coordinator", "127.0.0.1:1234",
+                 "--num-processes", "2", "--process-id", "0", "--local-device-ids", "0,x"]) == 2
+    assert "--local-device-ids" in capsys.readouterr().err
