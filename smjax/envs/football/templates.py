@@ -10,7 +10,7 @@ kick-off after we score, which the opponents take).
 
 * ``attack`` (attack and score): charge when the carrier's x >= 0.5, shoot within
   0.25 of (1, 0), else maintain possession. Initiation: we have the ball. Satisfied:
-  the ball is lost (after a goal of ours the opponents kick off, so scoring ends it too).
+  we scored (the tick our goal goes in); failed: the opponents control the ball.
 * ``defend``: the built-in AI (pressing, formation) for all 11 until we win the ball.
   Initiation: we do not have the ball. Satisfied: we have it.
 * ``maintain_possession``: the carrier sprints with the ball in the free direction
@@ -19,13 +19,18 @@ kick-off after we score, which the opponents take).
   support spots on the wings; with no free direction he passes to the teammate whose
   lane has the fewest possible interceptors (within 0.04 of it), then the most
   forward and open one: short pass below 0.4, long beyond, high when the lane is not
-  clear.
-  Initiation: we have the ball. Satisfied: our carrier reaches x >= 0.5, or it is lost.
-* ``charge``: the carrier sprints toward (1, 0). Satisfied: a left carrier within 0.3
-  of (1, 0), or we no longer control the ball.
+  clear. Initiation: the opponents do not control the ball (we have it, or it is
+  loose: then it is the one child of ``attack`` available, so an attack goes on
+  through a loose ball instead of leaving its learner no allowed choice). Satisfied:
+  our carrier reaches x >= 0.5; failed: the opponents control the ball.
+* ``charge``: the carrier sprints toward (1, 0). Initiation: a left player controls
+  the ball. Satisfied: a left carrier within 0.3 of (1, 0); failed: we no longer
+  control the ball.
 * ``shoot``: the carrier shoots. Initiation: a left player controls the ball.
   Satisfied: no left player controls it (the ball has left the shooter).
-All time out after 200 ticks (k_max).
+All time out after 200 ticks (k_max). While no left player controls the ball every
+controller hands all 11 players to the built-in AI (it chases loose balls and runs onto
+our passes); directing "the carrier" then would move the goalkeeper.
 """
 from __future__ import annotations
 
@@ -81,15 +86,24 @@ def _only(player: jax.Array, action: jax.Array) -> jax.Array:
     return actions.at[player].set(action.astype(jnp.int32))
 
 
+def _with_ball_only(state: FootballState, actions: jax.Array) -> jax.Array:
+    """``actions`` while a left player controls the ball, else the built-in AI for all 11.
+
+    Without a carrier there is nobody to direct (``_carrier`` would name the goalkeeper);
+    the AI runs to a loose ball or to our pass's landing point.
+    """
+    return jnp.where(left_controls(state), actions, jnp.full((_N,), C.BUILTIN_AI, jnp.int32))
+
+
 # ---- controllers -------------------------------------------------------------
 def charge_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
     c = _carrier(state)
     direction = quantize_direction(GOAL - state.pos[c])
-    return _only(c, steer(state, c, direction, jnp.bool_(True)))
+    return _with_ball_only(state, _only(c, steer(state, c, direction, jnp.bool_(True))))
 
 
 def shoot_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
-    return _only(_carrier(state), jnp.int32(C.SHOT))
+    return _with_ball_only(state, _only(_carrier(state), jnp.int32(C.SHOT)))
 
 
 # Carrying the ball: how far ahead a direction must be clear of opponents, and how much
@@ -155,7 +169,7 @@ def possession_actions(state: FootballState) -> jax.Array:
 
 
 def maintain_possession_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
-    return possession_actions(state)
+    return _with_ball_only(state, possession_actions(state))
 
 
 def attack_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
@@ -166,7 +180,7 @@ def attack_controller(key: jax.Array, state: FootballState, params) -> jax.Array
     keep = possession_actions(state)
     chosen = jnp.where(dist_goal < 0.25, shoot, jnp.where(x >= 0.5, charge, keep))
     # While our pass is in flight nobody controls the ball: let the AI run to it.
-    return jnp.where(left_controls(state), chosen, jnp.full((_N,), C.BUILTIN_AI, jnp.int32))
+    return _with_ball_only(state, chosen)
 
 
 def defend_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
@@ -223,6 +237,10 @@ def _we_control(state, params):
     return left_controls(state)
 
 
+def _they_do_not_control(state, params):
+    return ~right_controls(state)
+
+
 def make_templates() -> dict[str, OptionTemplate]:
     # (name, satisfied = F_o, failed = ends without the outcome, initiation, controller, doc)
     specs = [
@@ -230,7 +248,7 @@ def make_templates() -> dict[str, OptionTemplate]:
          "attack and score (fails when the ball is lost)"),
         ("defend", defend_satisfied, None, _we_do_not_have, defend_controller,
          "built-in defence until the ball is won"),
-        ("maintain_possession", possession_satisfied, possession_failed, _we_have,
+        ("maintain_possession", possession_satisfied, possession_failed, _they_do_not_control,
          maintain_possession_controller, "dribble into space or pass safely until x >= 0.5"),
         ("charge", charge_satisfied, charge_failed, _we_control, charge_controller,
          "carrier sprints toward the goal until within 0.3"),
