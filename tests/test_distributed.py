@@ -7,7 +7,9 @@ writes everything; process 1 runs in an empty working directory with its own --o
 must leave both untouched. A two-process run killed mid-level resumes (every process
 restoring process 0's checkpoint) to the same results.
 """
+import collections
 import json
+import math
 import os
 import signal
 import socket
@@ -17,8 +19,10 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from smjax.train import distributed as dist
+from smjax.train.sharding import training_mesh
 
 TESTS = str(Path(__file__).parent)
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=400,
@@ -178,3 +182,60 @@ def test_cli_reports_bad_distributed_flags(clean_env, capsys):
     assert main(["train", "craft/get_wood", "--coordinator", "127.0.0.1:1234",
                  "--num-processes", "2", "--process-id", "0", "--local-device-ids", "0,x"]) == 2
     assert "--local-device-ids" in capsys.readouterr().err
+
+
+@settings(max_examples=60, deadline=None)
+@given(num=st.integers(-2, 6), pid=st.integers(-2, 6))
+def test_process_ids_accepted_exactly_when_in_range(num, pid):
+    if num >= 1 and 0 <= pid < num:
+        assert dist.resolve("127.0.0.1:1234", num, pid) == ("127.0.0.1:1234", num, pid)
+    else:
+        with pytest.raises(ValueError, match="process_id|num_processes"):
+            dist.resolve("127.0.0.1:1234", num, pid)
+
+
+@settings(max_examples=60, deadline=None)
+@given(port=st.integers(-5, 70000), host=st.sampled_from(["127.0.0.1", "node-3", "[::1]", "a.b.c"]))
+def test_addresses_need_a_port_in_range(port, host):
+    address = f"{host}:{port}"
+    if 1 <= port <= 65535:
+        assert dist.check_address(address) == address
+    else:
+        with pytest.raises(ValueError, match="HOST:PORT|port must be"):
+            dist.check_address(address)
+
+
+class _FakeDevice:
+    """Enough of a device for the mesh arithmetic (several processes cannot be real here)."""
+
+    platform = "cpu"
+
+    def __init__(self, id_: int, process_index: int):
+        self.id, self.process_index = id_, process_index
+
+    def __repr__(self):
+        return f"dev{self.id}@p{self.process_index}"
+
+
+@settings(max_examples=80, deadline=None)
+@given(processes=st.integers(2, 4), per_process=st.integers(1, 4), seeds=st.integers(1, 16),
+       envs=st.integers(1, 64))
+def test_multiprocess_mesh_gives_every_process_an_equal_share(processes, per_process, seeds, envs):
+    n = processes * per_process
+    devices = [_FakeDevice(i, i // per_process) for i in range(n)]
+    g = math.gcd(seeds, n)
+    possible = any(g % a == 0 and envs % b == 0 and (a * b) % processes == 0 and n % (a * b) == 0
+                   for a in range(1, g + 1) for b in range(1, n // a + 1))
+    if not possible:
+        with pytest.raises(ValueError, match="cannot spread"):
+            training_mesh(seeds, envs, devices)
+        return
+    mesh = training_mesh(seeds, envs, devices)
+    seed_ways, env_ways = mesh.shape["seed"], mesh.shape["env"]
+    assert seeds % seed_ways == 0 and envs % env_ways == 0
+    used = list(mesh.devices.flat)
+    assert len({d.id for d in used}) == len(used)
+    shares = collections.Counter(d.process_index for d in used)
+    assert set(shares) == set(range(processes)) and len(set(shares.values())) == 1
+    if seeds % n == 0:  # seed-only sharding: bitwise the single-device numbers
+        assert (seed_ways, env_ways) == (n, 1)
