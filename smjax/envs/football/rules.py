@@ -8,8 +8,10 @@ Rules chosen (beyond physics.py):
   is low enough and a control roll succeeds: p = clip(1.4 - 16 |v|, 0.25, 1) for field
   players, clip(1.3 - 12 |v|, 0.35, 1) for keepers, so slow passes are almost always
   controlled and hard shots often get through. Any player, teammate or opponent, can
-  take a ball this way: that is how interceptions and saves happen. A player who just
-  kicked (KICK_COOLDOWN) or was dispossessed (TACKLED_COOLDOWN) cannot touch it.
+  take a ball this way: that is how interceptions and saves happen (a keeper who
+  catches it turns to face the play, so he never holds it over his own line). A
+  player who just kicked (KICK_COOLDOWN) or was dispossessed (TACKLED_COOLDOWN)
+  cannot touch it.
 * **Tackles.** Every opponent within TACKLE_RADIUS of a controlled ball wins it with
   probability 0.2 per tick (0.1 if the carrier dribbles). A sliding tackle (action 16)
   lunges the player forward, reaches SLIDE_RADIUS and wins the ball with probability
@@ -147,9 +149,15 @@ def _control(state: FootballState, prev_ball: jax.Array, noise: Noise) -> Footba
     able = (state.cooldown == 0) & (state.stun == 0)
     reach = loose & able & (path_dist < radius) & (low_z < height) & (noise.uniform[:, 0] < p_control)
     winner = jnp.argmin(jnp.where(reach, path_dist, _INF)).astype(jnp.int32)
+    # A keeper who catches the ball gathers it facing the play: the controlled ball sits
+    # BALL_OFFSET in front of its holder, so a keeper backing onto his line while
+    # facing his own goal would otherwise hold it over the line (a goal he saved).
+    keeper_catch = jnp.any(reach & keeper_hands & (_IDX == winner))
+    to_field = jnp.stack([team_sign(_TEAM_OF[winner]), 0.0])
+    facing = jnp.where(keeper_catch, state.facing.at[winner].set(to_field), state.facing)
     after = state.replace(
         owner=winner, last_touch=winner, pass_receiver=jnp.int32(-1),
-        ball_vel=jnp.zeros((3,)), ball_pos=state.ball_pos.at[2].set(0.0),
+        ball_vel=jnp.zeros((3,)), ball_pos=state.ball_pos.at[2].set(0.0), facing=facing,
     )
     return select_tree(jnp.any(reach), after, state)
 
