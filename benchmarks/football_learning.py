@@ -21,7 +21,7 @@ Top-down trains with games that go on when an attack ends (see ``train``): the n
 the frozen level 1 starts is the learner's next episode. Measured on the CPU (hard, 1 seed,
 64 envs, 2.1M steps): resetting to a kick-off after every attack instead trains attack
 from kick-offs only (P(goal) of the scripted attack there: 0.14) and the hierarchy then
-wins by +0.9 a game, against +3.6 with games that go on.
+wins by +0.9 a game, against +3.6 with games that go on (before the keeper fix).
 
 Writes OUT/football_learning.json (per run: per-seed goal differences, env steps per level,
 wall and compile seconds, the config) and OUT/football_learning.md (the table). Runs share
@@ -46,14 +46,15 @@ from smjax.train.results import build_results
 
 DIFFICULTIES = ("easy", "medium", "hard")
 METHODS = ("top-down", "flat")
-# The paper (CoRL 2022, Table/Fig. football): average goal difference per full game.
+# The paper's average goal difference per full game (as quoted in issue #5).
 PAPER = {"top-down": {"easy": 5.79, "medium": 3.0, "hard": 2.0},
          "flat": {"easy": 1.2, "medium": 0.8, "hard": 0.26}}
 # DQN settings shared by both methods: the library defaults, except one gradient step per
 # ENV_STEPS_PER_GRADIENT_STEP env steps (the default, one per rollout, is one per 2,048 env
 # steps at 64 envs: ~1,000 steps in 2.1M, under-trained). Measured on the CPU (hard, 2 seeds,
-# 64 envs, 2.1M steps): 1 step per 2,048 -> top-down +3.84 / flat +4.05; 1 per 256 ->
-# +4.27 / +4.46; 1 per 128 with 256x256 layers, batch 128 -> +4.18 / +4.73.
+# 64 envs, 2.1M steps, before the keeper fix in rules.py): 1 step per 2,048 -> top-down
+# +3.84 / flat +4.05; 1 per 256 -> +4.27 / +4.46; 1 per 128 with 256x256 layers, batch 128
+# -> +4.18 / +4.73.
 ENV_STEPS_PER_GRADIENT_STEP = 256
 ROLLOUT_TICKS = 32  # TrainConfig default
 
@@ -137,7 +138,7 @@ def train_one(difficulty: str, method: str, args, agent: dict) -> dict:
     wall = time.perf_counter() - t0
     steps = [sum(level["env_steps"][s] for level in res["levels"]) for s in range(args.seeds)]
     return {
-        "difficulty": difficulty, "method": method,
+        "difficulty": difficulty, "method": method, "continue_games": not args.reset_after_option,
         "goal_difference": res["final_return"],   # per seed: mean over eval games of (ours - theirs)
         "env_steps": steps,
         "levels": [{k: level[k] for k in ("template", "env_steps", "episodes", "reached",
