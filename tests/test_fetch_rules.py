@@ -138,3 +138,14 @@ def test_euler_of_known_rotation():
     rot = np.asarray(st.quat_to_mat(quat))
     np.testing.assert_allclose(rot @ np.array([1.0, 0, 0]), [np.cos(np.pi / 4), np.sin(np.pi / 4), 0],
                                atol=1e-6)
+
+
+def test_diverged_physics_terminates_with_a_finite_observation(env3):
+    env, params, state = env3
+    step = jax.jit(env.step_env)
+    bad = state.replace(data=state.data.replace(qvel=state.data.qvel.at[-1].set(jnp.nan)))
+    obs, _, r, terminated, _, info = step(jax.random.PRNGKey(1), bad, jnp.zeros(4), params)
+    assert bool(terminated) and bool(info["physics_diverged"]) and float(r) == 0.0
+    assert np.isfinite(np.asarray(obs)).all()
+    _, _, _, terminated, _, info = step(jax.random.PRNGKey(1), state, jnp.zeros(4), params)
+    assert not bool(terminated) and not bool(info["physics_diverged"])

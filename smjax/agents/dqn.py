@@ -59,10 +59,12 @@ class DQNConfig:
     huber_loss: bool = True
     max_grad_norm: float = 10.0
     store_incomplete: bool = True
+    reward_scale: float = 1.0         # rewards are multiplied by this before the TD target
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
         checks.check_range(self, "gamma", 0.0, 1.0)
+        checks.check_range(self, "reward_scale", 0.0, 1e6, low_open=True)
         checks.check_hidden_sizes(self)
         checks.check_choice(self, "activation", ("tanh", "relu", "gelu", "elu", "swish"))
         for name in ("buffer_capacity", "batch_size", "gradient_steps_per_update",
@@ -227,7 +229,7 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
                               traj.obs, traj.action_mask, last_obs)
         valid = decision if config.store_incomplete else jnp.logical_and(decision, tr.complete)
         flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
-        items = {"obs": flat(traj.obs), "action": flat(traj.action), "reward": flat(tr.reward),
+        items = {"obs": flat(traj.obs), "action": flat(traj.action), "reward": flat(tr.reward) * config.reward_scale,
                  "discount": flat(tr.discount), "terminal": flat(tr.terminal),
                  "next_obs": flat(tr.next_obs), "next_mask": flat(tr.next_mask)}
         num_decisions = decision.sum().astype(jnp.int32)

@@ -122,6 +122,13 @@ class FetchEnv(Environment[FetchState, FetchParams]):
         placed = blocks_placed(new_state, params)
         new_state = new_state.replace(placed=placed)
         r = reward(new_state, params)
+        # MJX has no divergence check of its own: a block squeezed between the fingers can
+        # blow up to inf/NaN, which would poison every learner fed this observation. Such
+        # an episode terminates (the auto-reset replaces it) with a finite observation and
+        # no reward, and says so in info["physics_diverged"].
+        diverged = ~(jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
+                     & (jnp.abs(data.qvel).max() < 1e3))
+        r = jnp.where(diverged, 0.0, r)
         truncated = new_state.step >= params.max_steps
         info = {
             "score": score(r, self.num_blocks),
@@ -129,9 +136,10 @@ class FetchEnv(Environment[FetchState, FetchParams]):
             "success": score(r, self.num_blocks),
             "is_success": jnp.all(placed),
             "placed": placed,
+            "physics_diverged": diverged,
         }
-        return (observation(new_state, self.config), new_state, r,
-                jnp.asarray(False), truncated, info)
+        obs = jnp.nan_to_num(observation(new_state, self.config), posinf=0.0, neginf=0.0)
+        return obs, new_state, r, diverged, truncated, info
 
     # ---- templates, hierarchies, rendering (other modules) ---------------------
     def templates(self) -> dict:
