@@ -52,6 +52,9 @@ def main() -> None:
     ap.add_argument("--threshold", type=float, default=0.85)
     ap.add_argument("--max-steps", type=int, default=300_000, help="env-step budget per level")
     ap.add_argument("--flat-max-steps", type=int, default=1_200_000, help="env-step budget of flat")
+    ap.add_argument("--algo", default="dqn", choices=["dqn", "ppo", "actor-critic"],
+                    help="learner of every level (the DQN settings below apply to dqn only)")
+    ap.add_argument("--gamma", type=float, default=GAMMA)
     ap.add_argument("--agent", action="append", metavar="KEY=VALUE", help="DQN override (JSON values)")
     ap.add_argument("--set", action="append", metavar="FIELD=VALUE", help="TrainConfig override")
     ap.add_argument("--env", action="append", metavar="KEY=VALUE",
@@ -61,7 +64,7 @@ def main() -> None:
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    agent = AGENT | _key_values(args.agent, "--agent")
+    agent = (AGENT if args.algo == "dqn" else {}) | _key_values(args.agent, "--agent")
     env_over = {"obs_include_goals": True} | _key_values(args.env, "--env")
     table = ["| blocks | method | env steps to threshold (mean +- std, reached) | final score (learned "
              "hierarchy) | wall s | compile s | paper: steps to score 1 |", "|---|---|---|---|---|---|---|"]
@@ -70,8 +73,8 @@ def main() -> None:
         run_dirs = []
         for method in args.methods:
             budget = args.flat_max_steps if method == "flat" else args.max_steps
-            fields = dict(method=method, algo="dqn", num_envs=args.num_envs, threshold=args.threshold,
-                          gamma=GAMMA, rollout_ticks=16,
+            fields = dict(method=method, algo=args.algo, num_envs=args.num_envs, threshold=args.threshold,
+                          gamma=args.gamma, rollout_ticks=16,
                           max_steps_per_level=budget, max_episodes_per_level=10**9,
                           eval_envs=64, eval_max_ticks=50 * n + 10, agent=agent)
             cfg = TrainConfig(**(fields | _key_values(args.set, "--set")))

@@ -17,7 +17,7 @@ gets the rest. Learning levels run their whole budget (no early stop at the 0.8 
 unless --stop-at-threshold), so both methods use the same number of env steps, reported
 per level.
 
-Top-down trains with games that go on when an attack ends (see ``train``): the next attack
+Top-down trains with games that go on when an attack ends (``continue_episodes``): the next attack
 the frozen level 1 starts is the learner's next episode. Measured on the CPU (hard, 1 seed,
 64 envs, 2.1M steps): resetting to a kick-off after every attack instead trains attack
 from kick-offs only (P(goal) of the scripted attack there: 0.14) and the hierarchy then
@@ -36,13 +36,8 @@ import time
 from pathlib import Path
 
 import smjax  # noqa: F401  (sets the XLA:CPU workaround before jax starts)
-from smjax.agents import make_agent
-from smjax.core.registry import make
-from smjax.options.runner import HierarchyRunner
 from smjax.train import TrainConfig
-from smjax.train.engine import Engine, frozen_mode
-from smjax.train.loop import HierarchyTrainer, plan_levels, resolve_hierarchy
-from smjax.train.results import build_results
+from smjax.train.run import run
 
 DIFFICULTIES = ("easy", "medium", "hard")
 METHODS = ("top-down", "flat")
@@ -95,34 +90,24 @@ def make_config(method: str, args, agent: dict) -> TrainConfig:
         levels = {"win_game": {"max_steps_per_level": 1},
                   "attack": {"max_steps_per_level": (chunks - 1) * chunk}}
         return TrainConfig(method="top-down", max_steps_per_level=chunks * chunk, levels=levels,
-                           success_window=window, **common)
+                           success_window=window, continue_episodes=not args.reset_after_option,
+                           **common)
     raise ValueError(f"unknown method {method!r}; valid: {list(METHODS)}")
 
 
 def train(task: str, cfg: TrainConfig, seeds: list[int], env_overrides: dict, *,
-          continue_games: bool, progress: bool) -> dict:
-    """``smjax.train.run.run`` without output files, optionally with games that go on.
+          progress: bool) -> dict:
+    """``smjax.train.run.run`` without output files.
 
-    ``continue_games``: the match is not reset when the option being trained ends, so
-    a level's next learner episode starts wherever the frozen level above calls it
-    again (for ``attack``: after ``defend`` has won the ball back), i.e. on the start
-    states the full game gives it. The trainer's default resets to a kick-off after
-    every learner episode, so ``attack`` would only ever be trained from kick-offs,
-    where the opponents stand compact (the runner's ``reset_on_learner_end`` flag,
-    not yet a TrainConfig field). It changes nothing for flat: its learner is the root,
-    whose episode is the game.
+    With ``cfg.continue_episodes`` the match is not reset when the option being trained
+    ends, so ``attack``'s next learner episode starts wherever the frozen level above
+    calls it again (after ``defend`` has won the ball back), i.e. on the start states the
+    full game gives it; the default resets to a kick-off, where the opponents stand
+    compact. It changes nothing for flat: its learner is the root, whose episode is the game.
     """
-    env, env_params = make(task, **env_overrides)
-    _, hierarchy = resolve_hierarchy(env, cfg)
-    agent = make_agent(cfg.algo, **cfg.agent)
-    engine = Engine(env, env_params, hierarchy, agent, cfg)
-    if continue_games:
-        engine.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
-                                        frozen_policy=frozen_mode(cfg), allow_teleport=True,
-                                        reset_on_learner_end=False)
-    trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), seeds, progress=progress)
-    raw = trainer.run()
-    return build_results(env.name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, cfg.to_dict())
+    res = run(task, cfg, seeds, None, env_overrides=env_overrides, progress=progress)
+    res.pop("_raw")
+    return res
 
 
 def mean_std(values: list[float]) -> tuple[float, float]:
@@ -134,7 +119,7 @@ def train_one(difficulty: str, method: str, args, agent: dict) -> dict:
     t0 = time.perf_counter()
     seeds = list(range(args.seed_offset, args.seed_offset + args.seeds))
     res = train(f"football/11v11_{difficulty}", cfg, seeds, {"observation": args.observation},
-                continue_games=not args.reset_after_option, progress=not args.quiet)
+                progress=not args.quiet)
     wall = time.perf_counter() - t0
     steps = [sum(level["env_steps"][s] for level in res["levels"]) for s in range(args.seeds)]
     return {

@@ -15,7 +15,7 @@ _spec.loader.exec_module(FL)
 
 def _args(num_envs=64, total=2_100_000, stop=False):
     return argparse.Namespace(num_envs=num_envs, total_steps=total, eval_games=8,
-                              stop_at_threshold=stop)
+                              stop_at_threshold=stop, reset_after_option=False)
 
 
 def _budget_used(cfg, chunk):

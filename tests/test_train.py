@@ -119,3 +119,13 @@ def test_per_level_overrides_are_checked():
             progress=False)
     with pytest.raises(ConfigError, match="max_steps_per_level"):
         TrainConfig(max_steps_per_level=-1)
+
+
+def test_continue_episodes_changes_where_levels_start():
+    cfg = TrainConfig(**(SMALL | {"max_episodes_per_level": 300}))
+    reset = run(make_keydoor(), cfg, [0], progress=False)
+    going_on = run(make_keydoor(), cfg.replace(continue_episodes=True), [0], progress=False)
+    assert [l["template"] for l in going_on["levels"]] == ["open_door", "give_key"]
+    assert going_on["levels"][1] != reset["levels"][1]  # give_key sees other start states
+    with pytest.raises(ConfigError, match="continue_episodes"):
+        TrainConfig(continue_episodes="yes")

@@ -42,6 +42,10 @@ class TrainConfig:
         (checked when training starts) and values override ``LEVEL_FIELDS``.
       gamma: discount per primitive tick (gamma**d for a teleported call of duration d).
       frozen_policy: how trained options act when frozen (auto: greedy for dqn, else sample).
+      continue_episodes: top-down/bottom-up only: do not reset the environment when the
+        option being trained ends; its next episode starts wherever the frozen levels above
+        call it again, i.e. on the states the full task gives it (football's ``attack`` is
+        otherwise only trained from kick-offs). Default: reset, as the paper does.
       eval_envs: episodes run (one per environment) to measure final_success.
       eval_max_ticks: cap on an evaluation episode's length.
       tensorboard: also write TensorBoard event files (OUT/tensorboard) of every level's
@@ -62,6 +66,7 @@ class TrainConfig:
     max_steps_per_level: int = 0
     gamma: float = 0.99
     frozen_policy: str = "auto"
+    continue_episodes: bool = False
     eval_envs: int = 256
     eval_max_ticks: int = 2000
     checkpoint_every: float = 60.0
@@ -92,6 +97,7 @@ class TrainConfig:
         need(isinstance(self.checkpoint_every, (int, float)) and self.checkpoint_every >= 0,
              "checkpoint_every", ">= 0 seconds")
         need(isinstance(self.tensorboard, bool), "tensorboard", "true or false")
+        need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
         need(isinstance(self.max_steps_per_level, int) and not isinstance(self.max_steps_per_level, bool)
              and self.max_steps_per_level >= 0, "max_steps_per_level", "an integer >= 0 (0: no step budget)")

@@ -37,7 +37,8 @@ class Engine:
         self.env, self.env_params, self.h, self.agent, self.cfg = env, env_params, hierarchy, agent, cfg
         mode = frozen_mode(cfg)
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
-                                      frozen_policy=mode, allow_teleport=True)
+                                      frozen_policy=mode, allow_teleport=True,
+                                      reset_on_learner_end=not cfg.continue_episodes)
         # Evaluation: the final product alone, no teleports (leaf controllers still run).
         self.eval_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                            frozen_policy=mode, allow_teleport=False)
