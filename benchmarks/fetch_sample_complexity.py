@@ -29,10 +29,43 @@ PAPER = {3: "4.5e5", 4: "6e5"}
 # -(blocks not in place) per tick, summed over options of up to 80 ticks: reward_scale keeps
 # its Q values O(10); gamma 0.96 per tick is the reference's per-decision discounts (0.2 for
 # an ~40-tick place, ~0.5 for a level-2 option) in SMDP form.
-AGENT = {"hidden_sizes": [256, 256], "learning_rate": 5e-4, "gradient_steps_per_update": 32,
+#
+# Rollouts span a whole episode (50 N ticks) and decisions still open at a rollout's end
+# are dropped (store_incomplete false). A place_i option runs 23-51 ticks (80 at most);
+# with the former 16-tick rollouts *every* place decision was cut at the rollout end: its
+# SMDP return held <= 16 ticks of reward and bootstrapped from max Q over all actions
+# (the agent's rollout-end mask is all-True) in a mid-option state, where the actions the
+# root never takes (reach/pick/release, untrained) had the largest Q. The root never saw
+# what a place did, and stayed at a random root's score (CPU: greedy 0.12 after 41k steps,
+# see the docstring of level_config). gradient_steps_per_update scales with the rollout
+# (2 per tick, the former 32 per 16 ticks) so a budget buys the same gradient steps.
+AGENT = {"hidden_sizes": [256, 256], "learning_rate": 5e-4,
          "batch_size": 128, "learning_starts": 256, "epsilon_decay_steps": 2000,
-         "target_update_period": 100, "buffer_capacity": 20000, "reward_scale": 0.1}
+         "target_update_period": 100, "buffer_capacity": 20000, "reward_scale": 0.1,
+         "store_incomplete": False}
+GRAD_STEPS_PER_TICK = 2
 GAMMA = 0.96
+
+
+def rollout_ticks_for(num_blocks: int, requested: int = 0) -> int:
+    """Ticks per rollout: ``requested`` or, by default, one whole episode (50 N ticks)."""
+    if requested < 0:
+        raise ValueError(f"--rollout-ticks must be >= 0, got {requested}")
+    return requested or 50 * num_blocks
+
+
+def level_config(num_blocks: int, method: str, args, agent: dict) -> TrainConfig:
+    """The TrainConfig of one (blocks, method) run (``args``: the parsed command line)."""
+    budget = args.flat_max_steps if method == "flat" else args.max_steps
+    ticks = rollout_ticks_for(num_blocks, args.rollout_ticks)
+    agent = dict(agent)
+    if args.algo == "dqn":
+        agent.setdefault("gradient_steps_per_update", GRAD_STEPS_PER_TICK * ticks)
+    fields = dict(method=method, algo=args.algo, num_envs=args.num_envs, threshold=args.threshold,
+                  gamma=args.gamma, rollout_ticks=ticks, updates_per_chunk=1,
+                  max_steps_per_level=budget, max_episodes_per_level=10**9,
+                  eval_envs=64, eval_max_ticks=50 * num_blocks + 10, agent=agent)
+    return TrainConfig(**(fields | _key_values(args.set, "--set")))
 
 
 def _fmt(values, scale=1.0):
@@ -55,6 +88,8 @@ def main() -> None:
     ap.add_argument("--algo", default="dqn", choices=["dqn", "ppo", "actor-critic"],
                     help="learner of every level (the DQN settings below apply to dqn only)")
     ap.add_argument("--gamma", type=float, default=GAMMA)
+    ap.add_argument("--rollout-ticks", type=int, default=0,
+                    help="ticks per rollout (default 0: one episode, 50 N; see AGENT's comment)")
     ap.add_argument("--agent", action="append", metavar="KEY=VALUE", help="DQN override (JSON values)")
     ap.add_argument("--set", action="append", metavar="FIELD=VALUE", help="TrainConfig override")
     ap.add_argument("--env", action="append", metavar="KEY=VALUE",
@@ -72,12 +107,7 @@ def main() -> None:
     for n in args.blocks:
         run_dirs = []
         for method in args.methods:
-            budget = args.flat_max_steps if method == "flat" else args.max_steps
-            fields = dict(method=method, algo=args.algo, num_envs=args.num_envs, threshold=args.threshold,
-                          gamma=args.gamma, rollout_ticks=16,
-                          max_steps_per_level=budget, max_episodes_per_level=10**9,
-                          eval_envs=64, eval_max_ticks=50 * n + 10, agent=agent)
-            cfg = TrainConfig(**(fields | _key_values(args.set, "--set")))
+            cfg = level_config(n, method, args, agent)
             run_dir = out / f"stack{n}_{method}"
             res = run(f"fetch/stack{n}", cfg, list(range(args.seeds)), run_dir, env_overrides=env_over,
                       progress=args.progress)
