@@ -99,3 +99,27 @@ def test_controller_templates_terminate_64_resets():
     ok = _rates(64)
     print("termination rates", dict(zip(SCHEDULE, ok)))
     assert np.all(ok >= 0.95), dict(zip(SCHEDULE, ok))
+
+
+def test_paper_hold_hierarchy_idles_only_once_the_tower_stands():
+    env, params = smjax.make("fetch/stack2")
+    hier = env.hierarchies()
+    hold_h = hier["paper_hold"]
+    assert hold_h.children["stack"] == ("place_0", "place_1", "hold")
+    assert hold_h.children["place_0"] == hier["paper"].children["place_0"]   # level 2 keeps noop
+    hold = env.templates()["hold"]
+    assert hold.k_max == 1 and hold.realisable
+    _, state = env.reset_env(jax.random.PRNGKey(5), params)
+    assert not bool(hold.initiation(state, params))          # reset: nothing placed
+    assert not bool(hold.satisfied(state, params))
+    # Put every block on its goal: now (and only now) the root may do nothing.
+    qpos = state.data.qpos
+    for i in range(env.num_blocks):
+        start = 9 + 7 * i
+        qpos = qpos.at[start:start + 3].set(state.goals[i])
+    placed = state.replace(data=state.data.replace(qpos=qpos))
+    assert bool(hold.initiation(placed, params))
+    one_off = qpos.at[9:12].add(jnp.asarray([0.06, 0.0, 0.0]))     # block 0 6 cm off its goal
+    assert not bool(hold.initiation(state.replace(data=state.data.replace(qpos=one_off)), params))
+    np.testing.assert_array_equal(
+        np.asarray(hold.controller(jax.random.PRNGKey(0), placed, params)), np.zeros(4))

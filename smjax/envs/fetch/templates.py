@@ -14,7 +14,14 @@ release_i      grip z > goal_i z + 0.05                                30    blo
 place_i        block i within 0.04 of goal i, not held, grip more     80    block i not in place
                than 0.08 from goal i ("released and clear")
 noop           never (runs exactly one tick: k_max 1)                  1     always
+hold           never (one tick, like noop)                             1     every block in place
 =============  =====================================================  =====  ==========
+
+``hold`` is the root's "do nothing" of the ``paper_hold`` hierarchy. A root that may do
+nothing for one tick in any state has a near-free way to procrastinate: with a per-tick
+gamma of 0.96 one tick of delay costs about 4 % of |Q|, within DQN's noise, and a learning
+root filled its buffer with ~56 noop decisions per episode and idled (CPU, 41k env steps:
+greedy score 0.32). Holding is only useful once the tower stands (keep it, gripper clear).
 """
 from __future__ import annotations
 
@@ -63,6 +70,10 @@ def place_initiation(state, params, i: int) -> jax.Array:
     return ~blocks_placed(state, params)[i]
 
 
+def hold_initiation(state, params) -> jax.Array:
+    return jnp.all(blocks_placed(state, params))
+
+
 def never(state, params) -> jax.Array:
     return jnp.asarray(False)
 
@@ -106,15 +117,26 @@ def make_templates(num_blocks: int) -> dict[str, OptionTemplate]:
         name="noop", satisfied=never, k_max=K_MAX["noop"], controller=_noop_controller,
         nominal_steps=NOMINAL_STEPS["noop"], description="do nothing for one tick",
     )
+    out["hold"] = OptionTemplate(
+        name="hold", satisfied=never, initiation=hold_initiation, k_max=K_MAX["noop"],
+        controller=_noop_controller, nominal_steps=NOMINAL_STEPS["noop"],
+        description="do nothing for one tick, once every block is in place",
+    )
     return out
 
 
 def make_hierarchies(env) -> dict:
-    """``paper``: stack -> place_i -> {reach_i, pick_i, release_i}; ``flat``: stack -> level 2."""
+    """``paper``: stack -> place_i -> {reach_i, pick_i, release_i}; ``flat``: stack -> level 2.
+
+    ``paper_hold``: ``paper`` with the root's ``noop`` replaced by ``hold`` (do nothing
+    only once the tower stands; see the module docstring). Level 2 keeps ``noop``.
+    """
     n = env.num_blocks
     paper = {"stack": [f"place_{i}" for i in range(n)] + ["noop"]}
     for i in range(n):
         paper[f"place_{i}"] = [f"reach_{i}", f"pick_{i}", f"release_{i}", "noop"]
+    paper_hold = dict(paper, stack=[f"place_{i}" for i in range(n)] + ["hold"])
     flat = {"stack": [f"{k}_{i}" for i in range(n) for k in ("reach", "pick", "release")]
             + ["noop"]}
-    return {"paper": declare(env, "stack", paper), "flat": declare(env, "stack", flat)}
+    return {"paper": declare(env, "stack", paper), "flat": declare(env, "stack", flat),
+            "paper_hold": declare(env, "stack", paper_hold)}
