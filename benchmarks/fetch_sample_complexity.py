@@ -36,9 +36,14 @@ PAPER = {3: "4.5e5", 4: "6e5"}
 # SMDP return held <= 16 ticks of reward and bootstrapped from max Q over all actions
 # (the agent's rollout-end mask is all-True) in a mid-option state, where the actions the
 # root never takes (reach/pick/release, untrained) had the largest Q. The root never saw
-# what a place did, and stayed at a random root's score (CPU: greedy 0.12 after 41k steps,
-# see the docstring of level_config). gradient_steps_per_update scales with the rollout
-# (2 per tick, the former 32 per 16 ticks) so a budget buys the same gradient steps.
+# what a place did, and stayed at a random root's score (CPU, 16 envs, 41k env steps:
+# greedy 0.12; whole-episode rollouts 0.32, and 1.0 with the paper_hold hierarchy below).
+# gradient_steps_per_update scales with the rollout (2 per tick, the former 32 per 16
+# ticks) so a budget buys the same gradient steps.
+#
+# Top-down uses the ``paper_hold`` hierarchy by default: the root's "do nothing" is only
+# initiable once every block is in place (smjax/envs/fetch/templates.py says why);
+# --hierarchy paper gives the unrestricted one-tick noop.
 AGENT = {"hidden_sizes": [256, 256], "learning_rate": 5e-4,
          "batch_size": 128, "learning_starts": 256, "epsilon_decay_steps": 2000,
          "target_update_period": 100, "buffer_capacity": 20000, "reward_scale": 0.1,
@@ -62,6 +67,7 @@ def level_config(num_blocks: int, method: str, args, agent: dict) -> TrainConfig
     if args.algo == "dqn":
         agent.setdefault("gradient_steps_per_update", GRAD_STEPS_PER_TICK * ticks)
     fields = dict(method=method, algo=args.algo, num_envs=args.num_envs, threshold=args.threshold,
+                  hierarchy=None if method == "flat" else args.hierarchy,
                   gamma=args.gamma, rollout_ticks=ticks, updates_per_chunk=1,
                   max_steps_per_level=budget, max_episodes_per_level=10**9,
                   eval_envs=64, eval_max_ticks=50 * num_blocks + 10, agent=agent)
@@ -88,6 +94,8 @@ def main() -> None:
     ap.add_argument("--algo", default="dqn", choices=["dqn", "ppo", "actor-critic"],
                     help="learner of every level (the DQN settings below apply to dqn only)")
     ap.add_argument("--gamma", type=float, default=GAMMA)
+    ap.add_argument("--hierarchy", default="paper_hold",
+                    help="hierarchy of top-down (default paper_hold; paper: root noop always allowed)")
     ap.add_argument("--rollout-ticks", type=int, default=0,
                     help="ticks per rollout (default 0: one episode, 50 N; see AGENT's comment)")
     ap.add_argument("--agent", action="append", metavar="KEY=VALUE", help="DQN override (JSON values)")

@@ -23,7 +23,8 @@ _spec.loader.exec_module(FSC)
 
 def _args(**over):
     base = dict(max_steps=300_000, flat_max_steps=1_200_000, rollout_ticks=0, algo="dqn",
-                num_envs=256, threshold=0.85, gamma=FSC.GAMMA, set=None)
+                num_envs=256, threshold=0.85, gamma=FSC.GAMMA, set=None,
+                hierarchy="paper_hold")
     return argparse.Namespace(**(base | over))
 
 
@@ -37,6 +38,8 @@ def test_default_rollout_spans_an_episode_and_drops_cut_decisions(blocks, method
     # the same gradient steps per env step as the former 32 per 16-tick rollout
     assert cfg.agent["gradient_steps_per_update"] == 2 * cfg.rollout_ticks
     assert cfg.max_steps_per_level == (1_200_000 if method == "flat" else 300_000)
+    # top-down's root may idle only once the tower stands; flat keeps its own hierarchy
+    assert cfg.hierarchy == (None if method == "flat" else "paper_hold")
 
 
 def test_explicit_rollout_and_agent_override_win():
