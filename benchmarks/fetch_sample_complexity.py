@@ -74,8 +74,8 @@ def level_config(num_blocks: int, method: str, args, agent: dict) -> TrainConfig
     return TrainConfig(**(fields | _key_values(args.set, "--set")))
 
 
-def _fmt(values, scale=1.0):
-    got = [v / scale for v in values if v is not None]
+def _fmt(values):
+    got = [v for v in values if v is not None]
     if not got:
         return f"not reached (0/{len(values)})"
     std = statistics.pstdev(got) if len(got) > 1 else 0.0

@@ -146,6 +146,7 @@ def test_diverged_physics_terminates_with_a_finite_observation(env3):
     bad = state.replace(data=state.data.replace(qvel=state.data.qvel.at[-1].set(jnp.nan)))
     obs, _, r, terminated, _, info = step(jax.random.PRNGKey(1), bad, jnp.zeros(4), params)
     assert bool(terminated) and bool(info["physics_diverged"]) and float(r) == 0.0
+    assert float(info["success"]) == 0.0 and float(info["score"]) == 0.0  # not "all placed"
     assert np.isfinite(np.asarray(obs)).all()
     _, _, _, terminated, _, info = step(jax.random.PRNGKey(1), state, jnp.zeros(4), params)
     assert not bool(terminated) and not bool(info["physics_diverged"])

@@ -229,9 +229,9 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
                               traj.obs, traj.action_mask, last_obs)
         valid = decision if config.store_incomplete else jnp.logical_and(decision, tr.complete)
         flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
-        items = {"obs": flat(traj.obs), "action": flat(traj.action), "reward": flat(tr.reward) * config.reward_scale,
-                 "discount": flat(tr.discount), "terminal": flat(tr.terminal),
-                 "next_obs": flat(tr.next_obs), "next_mask": flat(tr.next_mask)}
+        items = {"obs": flat(traj.obs), "action": flat(traj.action),
+                 "reward": flat(tr.reward) * config.reward_scale, "discount": flat(tr.discount),
+                 "terminal": flat(tr.terminal), "next_obs": flat(tr.next_obs), "next_mask": flat(tr.next_mask)}
         num_decisions = decision.sum().astype(jnp.int32)
         state = state.replace(
             buffer=insert(state.buffer, items, flat(valid)),

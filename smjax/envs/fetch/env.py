@@ -125,15 +125,17 @@ class FetchEnv(Environment[FetchState, FetchParams]):
         # MJX has no divergence check of its own: a block squeezed between the fingers can
         # blow up to inf/NaN, which would poison every learner fed this observation. Such
         # an episode terminates (the auto-reset replaces it) with a finite observation and
-        # no reward, and says so in info["physics_diverged"].
+        # no reward and no score (a zero reward would read as "all placed"), and says so in
+        # info["physics_diverged"].
         diverged = ~(jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
                      & (jnp.abs(data.qvel).max() < 1e3))
+        episode_score = jnp.where(diverged, 0.0, score(r, self.num_blocks))
         r = jnp.where(diverged, 0.0, r)
         truncated = new_state.step >= params.max_steps
         info = {
-            "score": score(r, self.num_blocks),
+            "score": episode_score,
             # the trainers' per-episode success of the root option: the paper's score
-            "success": score(r, self.num_blocks),
+            "success": episode_score,
             "is_success": jnp.all(placed),
             "placed": placed,
             "physics_diverged": diverged,

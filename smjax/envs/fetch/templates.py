@@ -132,10 +132,11 @@ def make_hierarchies(env) -> dict:
     only once the tower stands; see the module docstring). Level 2 keeps ``noop``.
     """
     n = env.num_blocks
-    paper = {"stack": [f"place_{i}" for i in range(n)] + ["noop"]}
+    places = [f"place_{i}" for i in range(n)]
+    paper = {"stack": places + ["noop"]}
     for i in range(n):
         paper[f"place_{i}"] = [f"reach_{i}", f"pick_{i}", f"release_{i}", "noop"]
-    paper_hold = dict(paper, stack=[f"place_{i}" for i in range(n)] + ["hold"])
+    paper_hold = dict(paper, stack=places + ["hold"])
     flat = {"stack": [f"{k}_{i}" for i in range(n) for k in ("reach", "pick", "release")]
             + ["noop"]}
     return {"paper": declare(env, "stack", paper), "flat": declare(env, "stack", flat),
