@@ -46,8 +46,7 @@ PAPER = {3: "4.5e5", 4: "6e5"}
 # --hierarchy paper gives the unrestricted one-tick noop.
 AGENT = {"hidden_sizes": [256, 256], "learning_rate": 5e-4,
          "batch_size": 128, "learning_starts": 256, "epsilon_decay_steps": 2000,
-         "target_update_period": 100, "buffer_capacity": 20000, "reward_scale": 0.1,
-         "store_incomplete": False}
+         "target_update_period": 100, "buffer_capacity": 20000, "reward_scale": 0.1}
 GRAD_STEPS_PER_TICK = 2
 GAMMA = 0.96
 

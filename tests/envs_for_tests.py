@@ -12,6 +12,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from smjax.agents.base import Transition
+from smjax.agents.smdp import carry_pending, no_pending
 from smjax.core import Environment, spaces
 
 
@@ -147,21 +148,24 @@ def make_option_driver_train(agent, num_envs: int, num_ticks: int, num_updates: 
         return (agent_state, new, key), (transition, stats)
 
     def update_fn(carry, _):
-        agent_state, s, key = carry
-        (agent_state, s, key), (traj, stats) = jax.lax.scan(tick_fn, carry, None, num_ticks)
+        agent_state, s, pending, key = carry
+        (agent_state, s, key), (traj, stats) = jax.lax.scan(
+            tick_fn, (agent_state, s, key), None, num_ticks)
         key, k_update = jax.random.split(key)
-        agent_state, metrics = agent.update(agent_state, traj, option_observation(s.tick), k_update)
+        traj, pending = carry_pending(pending, traj)
+        agent_state, metrics = agent.update(agent_state, traj, k_update)
         could, chose, violated = stats
         metrics = dict(metrics, chose_option0=chose.sum() / jnp.maximum(could.sum(), 1),
                        masked_violations=violated.sum())
-        return (agent_state, s, key), metrics
+        return (agent_state, s, pending, key), metrics
 
     def train(key):
         key, k_init, k_reset = jax.random.split(key, 3)
         state = reset(k_reset)
         agent_state = agent.init(k_init, option_observation(state.tick)[0], 3)
-        (agent_state, _, _), metrics = jax.lax.scan(update_fn, (agent_state, state, key), None,
-                                                    num_updates)
+        pending = no_pending(option_observation(state.tick), 3)
+        (agent_state, *_), metrics = jax.lax.scan(update_fn, (agent_state, state, pending, key),
+                                                  None, num_updates)
         return agent_state, metrics
 
     return train

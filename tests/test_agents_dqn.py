@@ -22,7 +22,7 @@ FAST = dict(learning_starts=64, epsilon_decay_steps=2000, target_update_period=2
             gradient_steps_per_update=8, learning_rate=1e-3, buffer_capacity=4096)
 
 
-def random_traj(seed: int, num_ticks: int = 7, num_envs: int = 3) -> tuple[Transition, np.ndarray]:
+def random_traj(seed: int, num_ticks: int = 7, num_envs: int = 3) -> Transition:
     rng = np.random.default_rng(seed)
     shape = (num_ticks, num_envs)
     mask = rng.random(shape + (NUM_ACTIONS,)) < 0.6
@@ -38,15 +38,16 @@ def random_traj(seed: int, num_ticks: int = 7, num_envs: int = 3) -> tuple[Trans
         discount=rng.choice([0.9, 0.9, 0.9**7], size=shape).astype(np.float32),
         done=rng.random(shape) < 0.15,
     )
-    last_obs = rng.integers(0, 9, (num_envs, OBS_DIM)).astype(np.uint8)
-    return traj, last_obs
+    return traj
 
 
-def reference_rows(traj, last_obs):
-    """Python SMDP transitions in insertion order (tick-major, then environment)."""
+def reference_rows(traj):
+    """Python SMDP transitions of the complete decisions in insertion order (tick-major,
+    then environment); decisions pending at the rollout end are not stored."""
     rows = reference_transitions(traj.reward, traj.discount, traj.done, traj.decision,
-                                 traj.obs, traj.action_mask, last_obs)
-    return [(traj.obs[t, b], traj.action[t, b]) + row[2:] for row in rows for t, b in [row[:2]]]
+                                 traj.obs, traj.action_mask)
+    return [(traj.obs[t, b], traj.action[t, b]) + row[2:] for row in rows for t, b in [row[:2]]
+            if row[-1]]
 
 
 def _init(agent, seed=0):
@@ -66,9 +67,9 @@ _FILL_ONLY = {capacity: _fill_only(capacity) for capacity in (5, 64)}
 @given(seed=st.integers(0, 2**31 - 1), capacity=st.sampled_from([5, 64]))
 def test_buffer_holds_smdp_transitions_of_decisions_only(seed, capacity):
     agent, update = _FILL_ONLY[capacity]
-    traj, last_obs = random_traj(seed)
-    state, metrics = update(_init(agent), traj, last_obs, jax.random.PRNGKey(0))
-    rows = reference_rows(traj, last_obs)
+    traj = random_traj(seed)
+    state, metrics = update(_init(agent), traj, jax.random.PRNGKey(0))
+    rows = reference_rows(traj)
     buf = jax.tree.map(np.asarray, state.buffer)
     assert int(buf.size) == min(len(rows), capacity)
     assert int(buf.insert_pos) == len(rows) % capacity
@@ -86,19 +87,19 @@ def test_buffer_holds_smdp_transitions_of_decisions_only(seed, capacity):
             np.testing.assert_array_equal(buf.next_mask[slot], next_mask)
 
 
-def test_incomplete_transitions_can_be_left_out():
-    traj, last_obs = random_traj(3)
-    agent = make_agent("dqn", learning_starts=10**6, store_incomplete=False)
-    state, _ = agent.update(_init(agent), traj, last_obs, jax.random.PRNGKey(0))
-    complete = [row for row in reference_rows(traj, last_obs) if row[-1]]
-    assert int(state.buffer.size) == len(complete) < int(np.sum(traj.decision))
+def test_pending_decisions_are_not_stored():
+    traj = random_traj(3)
+    agent = make_agent("dqn", learning_starts=10**6)
+    state, metrics = agent.update(_init(agent), traj, jax.random.PRNGKey(0))
+    assert int(state.buffer.size) == len(reference_rows(traj)) < int(np.sum(traj.decision))
+    assert int(metrics["decisions"]) == int(state.buffer.size)
 
 
 @pytest.mark.parametrize("double_dqn", [False, True])
 def test_smdp_targets_match_python_reference(double_dqn):
     agent = make_agent("dqn", learning_starts=10**6, double_dqn=double_dqn)
-    traj, last_obs = random_traj(11, num_ticks=9)
-    state, _ = agent.update(_init(agent), traj, last_obs, jax.random.PRNGKey(0))
+    traj = random_traj(11, num_ticks=9)
+    state, _ = agent.update(_init(agent), traj, jax.random.PRNGKey(0))
     online, target = _init(agent, 1).params, _init(agent, 2).params  # deliberately different
     buf = jax.tree.map(np.asarray, state.buffer)
     n = int(buf.size)
@@ -106,7 +107,7 @@ def test_smdp_targets_match_python_reference(double_dqn):
     q_target = np.asarray(agent.policy_logits(target, buf.next_obs[:n]))
     got = smdp_td_targets(q_online, q_target, buf.reward[:n], buf.discount[:n], buf.terminal[:n],
                           buf.next_mask[:n], double_dqn)
-    for i, row in enumerate(reference_rows(traj, last_obs)):
+    for i, row in enumerate(reference_rows(traj)):
         _, _, reward, discount, terminal, _, next_mask, _ = row
         if terminal:
             expected = reward
@@ -119,11 +120,11 @@ def test_smdp_targets_match_python_reference(double_dqn):
 
 
 def test_hard_and_polyak_target_updates():
-    traj, last_obs = random_traj(5, num_ticks=12, num_envs=4)
+    traj = random_traj(5, num_ticks=12, num_envs=4)
     agent = make_agent("dqn", learning_starts=1, gradient_steps_per_update=2, target_update_period=3)
     s0 = _init(agent)
-    s1, _ = agent.update(s0, traj, last_obs, jax.random.PRNGKey(1))
-    s2, _ = agent.update(s1, traj, last_obs, jax.random.PRNGKey(2))
+    s1, _ = agent.update(s0, traj, jax.random.PRNGKey(1))
+    s2, _ = agent.update(s1, traj, jax.random.PRNGKey(2))
     leaves = lambda t: jax.tree.leaves(t)  # noqa: E731
     assert int(s1.grad_steps) == 2 and int(s2.grad_steps) == 4
     assert all(np.array_equal(a, b) for a, b in zip(leaves(s1.target_params), leaves(s0.params)))
@@ -133,7 +134,7 @@ def test_hard_and_polyak_target_updates():
     agent = make_agent("dqn", learning_starts=1, gradient_steps_per_update=1,
                        target_update_period=1, tau=0.25)
     s0 = _init(agent)
-    s1, _ = agent.update(s0, traj, last_obs, jax.random.PRNGKey(1))
+    s1, _ = agent.update(s0, traj, jax.random.PRNGKey(1))
     for tgt, new, old in zip(leaves(s1.target_params), leaves(s1.params), leaves(s0.params)):
         np.testing.assert_allclose(tgt, 0.25 * new + 0.75 * old, rtol=1e-5, atol=1e-7)
 
@@ -141,9 +142,9 @@ def test_hard_and_polyak_target_updates():
 def test_epsilon_schedule_is_linear_in_decisions():
     agent = make_agent("dqn", epsilon_start=1.0, epsilon_end=0.1, epsilon_decay_steps=40,
                        learning_starts=10**6)
-    traj, last_obs = random_traj(0)
-    decisions = int(np.sum(traj.decision))
-    state, metrics = agent.update(_init(agent), traj, last_obs, jax.random.PRNGKey(0))
+    traj = random_traj(0)
+    decisions = len(reference_rows(traj))  # complete ones; a pending one counts when it completes
+    state, metrics = agent.update(_init(agent), traj, jax.random.PRNGKey(0))
     np.testing.assert_allclose(metrics["epsilon"], 1.0 - 0.9 * min(decisions / 40, 1.0), rtol=1e-5)
 
 

@@ -11,6 +11,7 @@ from envs_for_tests import EPISODE_TICKS, Corridor, make_option_driver_train, op
 from smjax.agents import make_agent
 from smjax.agents.actor_critic import ActorCriticConfig, exploration_epsilon
 from smjax.agents.flat_train import FlatTrainConfig, make_train
+from smjax.agents.smdp import complete_decisions
 from test_agents_dqn import random_traj
 
 NUM_ACTIONS = 4
@@ -26,7 +27,7 @@ def test_non_decision_ticks_do_not_influence_the_update(algo):
     """Changing what happens on non-decision ticks before an episode's first decision
     (or the action/obs recorded there) must not change the update at all."""
     agent = make_agent(algo)
-    traj, last_obs = random_traj(4, num_ticks=10, num_envs=3)
+    traj = random_traj(4, num_ticks=10, num_envs=3)
     # env 0: episode ends at tick 3; ticks 4, 5 precede the next first decision at 6
     decision = traj.decision.copy()
     done = traj.done.copy()
@@ -48,8 +49,8 @@ def test_non_decision_ticks_do_not_influence_the_update(algo):
     state = _init(agent)
     key = jax.random.PRNGKey(3)
     update = jax.jit(agent.update)
-    s1, m1 = update(state, traj, last_obs, key)
-    s2, m2 = update(state, perturbed, last_obs, key)
+    s1, m1 = update(state, traj, key)
+    s2, m2 = update(state, perturbed, key)
     chex.assert_trees_all_close(s1.params, s2.params, rtol=1e-6, atol=1e-7)
     chex.assert_trees_all_close(m1, m2, rtol=1e-6, atol=1e-7)
 
@@ -57,9 +58,11 @@ def test_non_decision_ticks_do_not_influence_the_update(algo):
 @pytest.mark.parametrize("algo", ["ppo", "actor-critic"])
 def test_update_counters_and_metrics(algo):
     agent = make_agent(algo)
-    traj, last_obs = random_traj(8, num_ticks=9, num_envs=2)
-    state, metrics = jax.jit(agent.update)(_init(agent), traj, last_obs, jax.random.PRNGKey(0))
-    assert int(state.decisions_seen) == int(traj.decision.sum())
+    traj = random_traj(8, num_ticks=9, num_envs=2)
+    state, metrics = jax.jit(agent.update)(_init(agent), traj, jax.random.PRNGKey(0))
+    # decisions are counted once, when they complete (a pending one counts next rollout)
+    complete = complete_decisions(jnp.asarray(traj.done), jnp.asarray(traj.decision))
+    assert int(state.decisions_seen) == int(complete.sum()) <= int(traj.decision.sum())
     assert int(state.updates) == 1 and int(state.grad_steps) >= 1
     for name, value in metrics.items():
         chex.assert_shape(value, ())
@@ -70,10 +73,10 @@ def test_update_counters_and_metrics(algo):
 @pytest.mark.parametrize("algo", ["ppo", "actor-critic"])
 def test_rollout_without_decisions_leaves_params_untouched(algo):
     agent = make_agent(algo)
-    traj, last_obs = random_traj(2)
+    traj = random_traj(2)
     traj = traj._replace(decision=np.zeros_like(traj.decision))
     state = _init(agent)
-    new_state, metrics = agent.update(state, traj, last_obs, jax.random.PRNGKey(0))
+    new_state, metrics = agent.update(state, traj, jax.random.PRNGKey(0))
     chex.assert_trees_all_equal(new_state.params, state.params)
     chex.assert_tree_all_finite(metrics)
 
@@ -83,8 +86,8 @@ def test_actor_critic_epsilon_follows_episodes_seen():
     np.testing.assert_allclose(exploration_epsilon(config, jnp.array(0)), 1.0)
     np.testing.assert_allclose(exploration_epsilon(config, jnp.array(200)), np.exp(-1.0), rtol=1e-6)
     agent = make_agent("actor-critic")
-    traj, last_obs = random_traj(9, num_ticks=10, num_envs=3)
-    state, metrics = agent.update(_init(agent), traj, last_obs, jax.random.PRNGKey(0))
+    traj = random_traj(9, num_ticks=10, num_envs=3)
+    state, metrics = agent.update(_init(agent), traj, jax.random.PRNGKey(0))
     assert int(state.episodes_seen) > 0
     np.testing.assert_allclose(metrics["epsilon"], np.exp(-5e-3 * int(state.episodes_seen)), rtol=1e-6)
 

@@ -34,7 +34,6 @@ def test_default_rollout_spans_an_episode_and_drops_cut_decisions(blocks, method
     cfg = FSC.level_config(blocks, method, _args(), dict(FSC.AGENT))
     assert cfg.rollout_ticks == 50 * blocks            # one whole episode
     assert cfg.rollout_ticks >= K_MAX["place"]          # a place option fits in a rollout
-    assert cfg.agent["store_incomplete"] is False       # no mid-option bootstraps
     # the same gradient steps per env step as the former 32 per 16-tick rollout
     assert cfg.agent["gradient_steps_per_update"] == 2 * cfg.rollout_ticks
     assert cfg.max_steps_per_level == (1_200_000 if method == "flat" else 300_000)

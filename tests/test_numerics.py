@@ -21,8 +21,8 @@ def test_nan_injection_stops_cleanly_and_keeps_last_good_checkpoint(tmp_path, mo
     def poisoned(algo, **kw):
         agent = real(algo, **kw)
 
-        def update(state, traj, last_obs, key):
-            new, metrics = agent.update(state, traj, last_obs, key)
+        def update(state, traj, key):
+            new, metrics = agent.update(state, traj, key)
             # after the third update of the first level the parameters go NaN
             bad = jax.tree.map(lambda p: jnp.where(new.updates >= 3, jnp.nan, p), new.params)
             return new.replace(params=bad), metrics

@@ -6,11 +6,13 @@ from the algorithm's config dataclass with the given fields overridden::
     agent = make_agent("actor-critic")
     state = agent.init(key, example_obs, num_actions)           # example_obs unbatched
     out = agent.act(state, obs, mask, key)                       # obs [B, ...], mask [B, A]
-    state, metrics = agent.update(state, traj, last_obs, key)    # traj: Transition [T, B]
+    state, metrics = agent.update(state, traj, key)              # traj: Transition [T, B]
     logits = agent.policy_logits(state.params, obs)              # greedy scores [B, A]
 
 Flat training on an ordinary environment: ``smjax.agents.flat_train.make_train``.
-Returns over decisions: ``smjax.agents.smdp`` (``smdp_gae``, ``smdp_transitions``).
+Returns over decisions: ``smjax.agents.smdp`` (``smdp_gae``, ``smdp_transitions``); a
+decision still running at a rollout's end is carried into the next rollout with
+``carry_pending`` (the update trains it once it completes).
 """
 from __future__ import annotations
 
@@ -22,7 +24,7 @@ from smjax.agents.base import ActOutput, Agent, Transition
 from smjax.agents.config import replace_checked
 from smjax.agents.dqn import DQNConfig
 from smjax.agents.ppo import PPOConfig
-from smjax.agents.smdp import smdp_gae, smdp_transitions
+from smjax.agents.smdp import carry_pending, no_pending, smdp_gae, smdp_transitions
 
 ALGOS: tuple[str, ...] = ("ppo", "dqn", "actor-critic")
 

@@ -6,9 +6,10 @@ gamma 0.99 (gamma**d on teleported template calls), exploration
 *allowed* action, otherwise a sample from the policy.
 
 Returns are SMDP Monte-Carlo returns (``smdp_gae`` with ``lam = 1``): 0 bootstrap at an
-episode end; a decision still open at the rollout end bootstraps from the critic's value
-of ``last_obs`` (``bootstrap_at_rollout_end=True``) or from 0 (the reference updated only
-after whole episodes, so it never needed either). One gradient step per ``update`` call;
+episode end. A decision still open at the rollout end is not trained here (the caller
+carries it into the next rollout, see :mod:`smjax.agents.smdp`); the decisions before it
+bootstrap from the critic's value of its state (``bootstrap_at_rollout_end=True``) or
+from 0 (the reference updated only after whole episodes, so it never needed either). One gradient step per ``update`` call;
 the reference updated once per 20 episodes, which the trainer reproduces by choosing the
 rollout length.
 
@@ -33,7 +34,7 @@ from smjax.agents.ppo import (
     make_network,
     sample_actions,
 )
-from smjax.agents.smdp import episodes_with_decision, smdp_gae
+from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_gae
 
 
 @dataclass(frozen=True)
@@ -104,19 +105,16 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
         total = policy_loss + config.vf_coef * value_loss - config.ent_coef * entropy
         return total, {"policy_loss": policy_loss, "value_loss": value_loss, "entropy": entropy}
 
-    def update(state: PolicyGradientState, traj: Transition, last_obs: jax.Array, key: jax.Array):
+    def update(state: PolicyGradientState, traj: Transition, key: jax.Array):
         del key  # the update is deterministic given the rollout
-        traj, last_obs = jax.tree.map(jnp.asarray, (traj, last_obs))  # numpy inputs too
+        traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
         num_ticks, num_envs = traj.reward.shape[:2]
         decision = traj.decision.astype(bool)
-        if config.bootstrap_at_rollout_end:
-            _, last_value = network_for(traj.action_mask.shape[-1]).apply(
-                state.params, flatten_obs(last_obs))
-        else:
-            last_value = jnp.zeros((num_envs,), jnp.float32)
         _, returns = smdp_gae(traj.reward, traj.discount, traj.done, decision,
-                              jnp.where(decision, traj.value, 0.0),
-                              last_value, 1.0)
+                              jnp.where(decision, traj.value, 0.0), 1.0,
+                              bootstrap=config.bootstrap_at_rollout_end)
+        episodes = episodes_with_decision(traj.done, decision)
+        decision = complete_decisions(traj.done, decision)
         num_items = num_ticks * num_envs
         obs = flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1)
         action = jnp.where(decision, traj.action, 0).reshape(num_items).astype(jnp.int32)
@@ -138,7 +136,7 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
             opt_state=opt_state,
             grad_steps=state.grad_steps + has_decision.astype(jnp.int32),
             updates=state.updates + 1,
-            episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
+            episodes_seen=state.episodes_seen + episodes,
             decisions_seen=state.decisions_seen + num_decisions,
         )
         metrics = dict(aux, total_loss=total, decisions=num_decisions,

@@ -13,7 +13,9 @@ An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over
 
 * ``init(key, example_obs, num_actions) -> state`` (state is a pytree with ``.params``)
 * ``act(state, obs[B], mask[B, A], key) -> ActOutput`` (exploring behaviour policy)
-* ``update(state, traj: Transition[T, B], last_obs[B], key) -> (state, metrics)``
+* ``update(state, traj: Transition[T, B], key) -> (state, metrics)``: trains on the
+  decisions that complete inside ``traj``; one still running at the end is the caller's
+  to carry into the next rollout (``smjax.agents.smdp.carry_pending``)
 * ``policy_logits(params, obs[B]) -> logits[B, A]`` (greedy scores for a frozen policy
   in the policy bank: actor logits for policy-gradient learners, Q-values for DQN)
 """

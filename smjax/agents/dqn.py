@@ -10,9 +10,9 @@ sampled minibatches. The target of a transition is
 with R the discounted reward sum of the ticks until the next decision and D the product
 of their discounts (gamma**k, or gamma**d for teleported template calls); the stored
 action mask of the next decision restricts the max (double DQN: argmax by the online
-network, value by the target network). A decision still pending at the rollout end is
-stored with ``s' = last_obs`` and all actions allowed (its true mask is unknown) when
-``store_incomplete`` is True, and dropped otherwise.
+network, value by the target network). A decision still pending at the rollout end is not
+stored: the caller carries it into the next rollout (``smdp.carry_pending``), where it is
+stored once complete, with its true next decision state and mask.
 """
 from __future__ import annotations
 
@@ -58,7 +58,6 @@ class DQNConfig:
     double_dqn: bool = True
     huber_loss: bool = True
     max_grad_norm: float = 10.0
-    store_incomplete: bool = True
     reward_scale: float = 1.0         # rewards are multiplied by this before the TD target
 
     def __post_init__(self):
@@ -220,21 +219,20 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
                    "stepped": ready.astype(jnp.float32)}
         return new_state, metrics
 
-    def update(state: DQNState, traj: Transition, last_obs: jax.Array, key: jax.Array):
-        traj, last_obs = jax.tree.map(jnp.asarray, (traj, last_obs))  # numpy inputs too
+    def update(state: DQNState, traj: Transition, key: jax.Array):
+        traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
         num_ticks, num_envs = traj.reward.shape[:2]
         num_items = num_ticks * num_envs
         decision = traj.decision.astype(bool)
         tr = smdp_transitions(traj.reward, traj.discount, traj.done, decision,
-                              traj.obs, traj.action_mask, last_obs)
-        valid = decision if config.store_incomplete else jnp.logical_and(decision, tr.complete)
+                              traj.obs, traj.action_mask)
         flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
         items = {"obs": flat(traj.obs), "action": flat(traj.action),
                  "reward": flat(tr.reward) * config.reward_scale, "discount": flat(tr.discount),
                  "terminal": flat(tr.terminal), "next_obs": flat(tr.next_obs), "next_mask": flat(tr.next_mask)}
-        num_decisions = decision.sum().astype(jnp.int32)
+        num_decisions = tr.valid.sum().astype(jnp.int32)  # each counted once, when complete
         state = state.replace(
-            buffer=insert(state.buffer, items, flat(valid)),
+            buffer=insert(state.buffer, items, flat(tr.valid)),
             decisions_seen=state.decisions_seen + num_decisions,
             episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
             updates=state.updates + 1,

@@ -6,7 +6,9 @@ program and ``jax.vmap(train)(keys)`` trains several seeds at once. Every tick i
 decision of the learner, the reward is the environment's reward, the discount is
 ``config.gamma`` and ``done = terminated | truncated`` (truncation is treated as terminal,
 the common simplification; the auto-reset inside ``env.step`` starts the next episode).
-All actions are allowed (the protocol has no action masks).
+All actions are allowed (the protocol has no action masks). The last tick of a rollout
+is a decision whose outcome lies in the next rollout: it is carried there
+(``smdp.carry_pending``) and trained as that rollout's row 0.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import jax.numpy as jnp
 
 from smjax.agents import config as checks
 from smjax.agents.base import Agent, Transition
+from smjax.agents.smdp import carry_pending, no_pending
 from smjax.core import EpisodeStatistics, spaces
 
 
@@ -77,11 +80,12 @@ def make_train(
             return (agent_state, env_state, next_obs, key), (transition, episode)
 
         def update_step(carry, _):
-            agent_state, env_state, obs, key = carry
+            agent_state, env_state, obs, pending, key = carry
             (agent_state, env_state, obs, key), (traj, episode) = jax.lax.scan(
                 tick, (agent_state, env_state, obs, key), None, config.num_steps)
             key, key_update = jax.random.split(key)
-            agent_state, metrics = agent.update(agent_state, traj, obs, key_update)
+            traj, pending = carry_pending(pending, traj)
+            agent_state, metrics = agent.update(agent_state, traj, key_update)
             finished, ep_return, ep_length = episode
             count = finished.sum()
             safe = jnp.maximum(count, 1)
@@ -93,10 +97,10 @@ def make_train(
                     count > 0, jnp.sum(jnp.where(finished, ep_length, 0)) / safe, jnp.nan),
                 episodes=count.astype(jnp.int32),
             )
-            return (agent_state, env_state, obs, key), metrics
+            return (agent_state, env_state, obs, pending, key), metrics
 
-        (agent_state, _, _, _), metrics = jax.lax.scan(
-            update_step, (agent_state, env_state, obs, key), None, config.num_updates)
+        start = (agent_state, env_state, obs, no_pending(obs, num_actions), key)
+        (agent_state, *_), metrics = jax.lax.scan(update_step, start, None, config.num_updates)
         return agent_state, metrics
 
     return train

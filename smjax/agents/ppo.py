@@ -1,7 +1,8 @@
 """PPO for discrete, masked actions over SMDP decisions.
 
-The rollout ``Transition[T, B]`` holds every tick; only ticks with ``decision`` train:
-every loss term is a mean over decision ticks (non-decision ticks weigh 0), advantages
+The rollout ``Transition[T, B]`` holds every tick; only ticks with a complete decision
+train (a decision pending at the rollout end returns as row 0 of the next rollout, see
+:mod:`smjax.agents.smdp`): every loss term is a mean over those ticks (non-decision ticks weigh 0), advantages
 come from :func:`smjax.agents.smdp.smdp_gae` and are normalised over decisions only.
 Minibatches partition the T*B ticks with the decisions dealt evenly among them (every
 minibatch gets the same number of decisions, +-1, however rarely the learner decides);
@@ -35,7 +36,7 @@ from smjax.agents.networks import (
     sample_from_log_probs,
     take_action,
 )
-from smjax.agents.smdp import episodes_with_decision, smdp_gae
+from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_gae
 
 
 @dataclass(frozen=True)
@@ -184,15 +185,16 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         }
         return total, aux
 
-    def update(state: PolicyGradientState, traj: Transition, last_obs: jax.Array, key: jax.Array):
-        traj, last_obs = jax.tree.map(jnp.asarray, (traj, last_obs))  # numpy inputs too
+    def update(state: PolicyGradientState, traj: Transition, key: jax.Array):
+        traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
         num_ticks, num_envs = traj.reward.shape[:2]
         num_items = num_ticks * num_envs
+        # Train on complete decisions; a pending one returns in the next rollout (smdp.py).
         decision = traj.decision.astype(bool)
-        _, last_value = network_for(traj.action_mask.shape[-1]).apply(state.params, flatten_obs(last_obs))
         adv, ret = smdp_gae(traj.reward, traj.discount, traj.done, decision,
-                            jnp.where(decision, traj.value, 0.0),
-                            last_value, config.gae_lambda)
+                            jnp.where(decision, traj.value, 0.0), config.gae_lambda)
+        episodes = episodes_with_decision(traj.done, decision)
+        decision = complete_decisions(traj.done, decision)
         if config.normalize_advantages:
             mean = masked_mean(adv, decision)
             var = masked_mean(jnp.square(adv - mean), decision)
@@ -240,7 +242,7 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
             opt_state=opt_state,
             grad_steps=grad_steps,
             updates=state.updates + 1,
-            episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
+            episodes_seen=state.episodes_seen + episodes,
             decisions_seen=state.decisions_seen + num_decisions,
         )
         metrics.update(

@@ -18,11 +18,14 @@ itself into the carry; a decision tick consumes it and becomes the new boundary.
 tick cuts the carry (what follows belongs to the next episode), so rewards of ticks
 before the learner's first decision of an episode can never reach the previous episode.
 
-Rollout-end approximation: a decision still pending at the last tick (no later decision,
-no episode end) bootstraps from ``last_value``, the learner's value of the observation
-after the last tick, even though that state need not be a decision state of the learner
-(an option it called may still be running). The trainer supplies it; it is exact when the
-learner decides on every tick (flat training).
+**Decisions pending at the rollout end are not trained here.** A decision with neither a
+later decision nor an episode end inside the rollout is *incomplete*: the option it
+called may still be running, so the state after the last tick is not one where the
+learner decides, and bootstrapping from it (with a value or Q-values of a state the
+learner never chooses in, and an unknown action mask) biases every long option. Instead
+the caller keeps it with :func:`carry_pending` and passes it back as row 0 of the next
+rollout, with its reward and discount accumulated so far; it is trained there, once it
+completes. Every decision is thus trained exactly once, on its true SMDP target.
 """
 from __future__ import annotations
 
@@ -30,6 +33,8 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
+from smjax.agents.base import Transition
 
 
 def _tick_accumulate(carry_reward, carry_discount, reward, discount, done):
@@ -40,67 +45,82 @@ def _tick_accumulate(carry_reward, carry_discount, reward, discount, done):
     return smdp_reward, smdp_discount
 
 
+def complete_decisions(done: jax.Array, decision: jax.Array) -> jax.Array:
+    """bool ``[T, B]``: decisions followed, inside the rollout, by another decision or an
+    episode end (what the learners train on; the others are pending, see the module doc)."""
+    done = done.astype(bool)
+    decision = decision.astype(bool)
+
+    def step(closed_after, tick):
+        d, dec = tick
+        closed = jnp.logical_or(d, closed_after)   # this tick's decision (if any) is closed
+        return jnp.logical_or(dec, closed), jnp.logical_and(dec, closed)
+
+    _, complete = jax.lax.scan(step, jnp.zeros(done.shape[1:], bool), (done, decision),
+                               reverse=True)
+    return complete
+
+
 def smdp_gae(
     traj_reward: jax.Array,
     discount: jax.Array,
     done: jax.Array,
     decision: jax.Array,
     value: jax.Array,
-    last_value: jax.Array,
     lam: float | jax.Array,
+    bootstrap: bool = True,
 ) -> tuple[jax.Array, jax.Array]:
     """Generalised advantage estimation across SMDP decisions.
 
     ``A_t = delta_t + D_t * lam * A_next`` with ``A_next`` the advantage of the next
-    decision (0 past the rollout end or after an episode end). Returns
-    ``(advantages, returns)`` of shape ``[T, B]``, ``returns = advantages + value``; both
-    are 0 on non-decision ticks. ``lam = 1`` gives SMDP Monte-Carlo returns bootstrapped
-    only at the rollout end.
+    decision (0 after an episode end). Returns ``(advantages, returns)`` of shape
+    ``[T, B]``, ``returns = advantages + value``; both are 0 on non-decision ticks and on
+    incomplete decisions (:func:`complete_decisions`). A decision whose next decision is
+    the incomplete one bootstraps from that decision's value (0 when ``bootstrap`` is
+    False) and its advantage chain stops there (truncated GAE). ``lam = 1`` gives SMDP
+    Monte-Carlo returns bootstrapped only at the pending decision.
     """
     reward = traj_reward.astype(jnp.float32)
     discount = discount.astype(jnp.float32)
     value = value.astype(jnp.float32)
     decision = decision.astype(bool)
+    complete = complete_decisions(done, decision)
     lam = jnp.asarray(lam, jnp.float32)
 
     def step(carry, tick):
         acc_reward, acc_discount, next_value, next_adv = carry
-        r, g, d, dec, v = tick
+        r, g, d, dec, ok, v = tick
         smdp_reward, smdp_discount = _tick_accumulate(acc_reward, acc_discount, r, g, d)
         delta = smdp_reward + smdp_discount * next_value - v
-        adv = delta + smdp_discount * lam * next_adv
+        adv = jnp.where(ok, delta + smdp_discount * lam * next_adv, 0.0)
+        pending_value = v if bootstrap else jnp.zeros_like(v)
         new_carry = (
             jnp.where(dec, 0.0, smdp_reward),
             jnp.where(dec, 1.0, smdp_discount),
-            jnp.where(dec, v, next_value),
+            jnp.where(dec, jnp.where(ok, v, pending_value), next_value),
             jnp.where(dec, adv, next_adv),
         )
-        adv_out = jnp.where(dec, adv, 0.0)
-        return new_carry, (adv_out, jnp.where(dec, adv + v, 0.0))
+        trained = jnp.logical_and(dec, ok)
+        return new_carry, (jnp.where(trained, adv, 0.0), jnp.where(trained, adv + v, 0.0))
 
     batch = reward.shape[1:]
-    init = (
-        jnp.zeros(batch, jnp.float32),
-        jnp.ones(batch, jnp.float32),
-        last_value.astype(jnp.float32),
-        jnp.zeros(batch, jnp.float32),
-    )
+    init = (jnp.zeros(batch, jnp.float32), jnp.ones(batch, jnp.float32),
+            jnp.zeros(batch, jnp.float32), jnp.zeros(batch, jnp.float32))
     _, (advantages, returns) = jax.lax.scan(
-        step, init, (reward, discount, done, decision, value), reverse=True
+        step, init, (reward, discount, done, decision, complete, value), reverse=True
     )
     return advantages, returns
 
 
 class SMDPTransitions(NamedTuple):
-    """Per tick ``[T, B, ...]``; meaningful where ``valid`` (= the learner decided there)."""
+    """Per tick ``[T, B, ...]``; meaningful where ``valid`` (complete decisions)."""
 
     reward: jax.Array       # R_t, the discounted reward sum until the next decision
     discount: jax.Array     # D_t without the terminal cut: product of the k tick discounts
     terminal: jax.Array     # an episode ended before the next decision (no bootstrap)
-    next_obs: jax.Array     # observation of the next decision (last_obs at the rollout end)
-    next_mask: jax.Array    # allowed actions at the next decision (all True at rollout end)
-    complete: jax.Array     # the next decision (or the episode end) lies inside the rollout
-    valid: jax.Array        # the learner decided on this tick
+    next_obs: jax.Array     # observation of the next decision
+    next_mask: jax.Array    # allowed actions at the next decision
+    valid: jax.Array        # a complete decision of the learner on this tick
 
 
 def smdp_transitions(
@@ -110,54 +130,85 @@ def smdp_transitions(
     decision: jax.Array,
     obs: jax.Array,
     action_mask: jax.Array,
-    last_obs: jax.Array,
 ) -> SMDPTransitions:
     """Pair each decision with its SMDP reward, discount product, next decision and end flag.
 
     For Q-learning: the target of a decision at tick t is
     ``reward + discount * (1 - terminal) * max_{a' in next_mask} Q(next_obs, a')``.
-    A decision pending at the rollout end gets ``next_obs = last_obs`` and an all-True
-    ``next_mask`` (the mask there is unknown), and ``complete = False``.
+    Incomplete decisions are not ``valid`` (their next decision lies in a later rollout).
     """
     reward = traj_reward.astype(jnp.float32)
     discount = discount.astype(jnp.float32)
     done = done.astype(bool)
     decision = decision.astype(bool)
-    num_actions = action_mask.shape[-1]
 
     def step(carry, tick):
-        acc_reward, acc_discount, acc_terminal, nxt_obs, nxt_mask, nxt_complete = carry
+        acc_reward, acc_discount, acc_terminal, nxt_obs, nxt_mask = carry
         r, g, d, dec, o, m = tick
         # Keep the raw discount product separate from the terminal flag so a target can
         # be inspected (and reproduced) without the product silently becoming 0.
         smdp_reward = r + g * jnp.where(d, 0.0, acc_reward)
         smdp_discount = g * jnp.where(d, 1.0, acc_discount)
         terminal = jnp.logical_or(d, acc_terminal)
-        complete = jnp.logical_or(d, nxt_complete)
-        out = (smdp_reward, smdp_discount, terminal, nxt_obs, nxt_mask, complete)
+        out = (smdp_reward, smdp_discount, terminal, nxt_obs, nxt_mask)
         new_carry = (
             jnp.where(dec, 0.0, smdp_reward),
             jnp.where(dec, 1.0, smdp_discount),
             jnp.where(dec, False, terminal),
             _where_batch(dec, o, nxt_obs),
             _where_batch(dec, m, nxt_mask),
-            jnp.where(dec, True, complete),
         )
         return new_carry, out
 
     batch = reward.shape[1:]
-    init = (
-        jnp.zeros(batch, jnp.float32),
-        jnp.ones(batch, jnp.float32),
-        jnp.zeros(batch, bool),
-        last_obs.astype(obs.dtype),
-        jnp.ones(batch + (num_actions,), bool),
-        jnp.zeros(batch, bool),
-    )
-    _, (r_out, g_out, term_out, next_obs, next_mask, complete) = jax.lax.scan(
+    # Placeholders for decisions with nothing after them (incomplete): never valid.
+    init = (jnp.zeros(batch, jnp.float32), jnp.ones(batch, jnp.float32), jnp.zeros(batch, bool),
+            jnp.zeros_like(obs[0]), jnp.zeros_like(action_mask[0], bool))
+    _, (r_out, g_out, term_out, next_obs, next_mask) = jax.lax.scan(
         step, init, (reward, discount, done, decision, obs, action_mask), reverse=True
     )
-    return SMDPTransitions(r_out, g_out, term_out, next_obs, next_mask, complete, decision)
+    valid = complete_decisions(done, decision)
+    return SMDPTransitions(r_out, g_out, term_out, next_obs, next_mask, valid)
+
+
+def no_pending(obs: jax.Array, num_actions: int) -> Transition:
+    """The empty pending row for a batch (``obs [B, ...]``): no decision, reward 0, discount 1."""
+    batch = obs.shape[:1]
+    return Transition(
+        obs=jnp.zeros_like(obs), action=jnp.zeros(batch, jnp.int32),
+        action_mask=jnp.ones(batch + (int(num_actions),), bool),
+        log_prob=jnp.zeros(batch, jnp.float32), value=jnp.zeros(batch, jnp.float32),
+        decision=jnp.zeros(batch, bool), reward=jnp.zeros(batch, jnp.float32),
+        discount=jnp.ones(batch, jnp.float32), done=jnp.zeros(batch, bool))
+
+
+def carry_pending(pending: Transition, traj: Transition) -> tuple[Transition, Transition]:
+    """Prepend last rollout's pending decisions; return this rollout's.
+
+    ``pending`` is a ``Transition[B]`` row (from :func:`no_pending` or a previous call):
+    where ``decision`` is set it is a learner decision whose option had not finished,
+    with ``reward``/``discount`` the discounted reward sum and discount product of all its
+    ticks so far. Returns ``(traj_with_row0 [T+1, B], new_pending [B])``: the update sees
+    the pending decision as an ordinary decision tick at row 0, whose later ticks follow in
+    this rollout, so its SMDP target is exact once it completes.
+    """
+    traj = jax.tree.map(lambda p, t: t.astype(p.dtype), pending, traj)
+    extended = jax.tree.map(lambda p, t: jnp.concatenate([p[None], t]), pending, traj)
+
+    def step(p: Transition, row: Transition):
+        dec = row.decision.astype(bool)
+        grown = p._replace(reward=p.reward + p.discount * row.reward,
+                           discount=p.discount * row.discount)
+        nxt = jax.tree.map(lambda a, b: _where_batch(dec, a, b), row, grown)
+        active = jnp.logical_and(jnp.logical_or(p.decision, dec), ~row.done.astype(bool))
+        nxt = nxt._replace(decision=active, done=jnp.zeros_like(active),
+                           reward=jnp.where(active, nxt.reward, 0.0),
+                           discount=jnp.where(active, nxt.discount, 1.0))
+        return nxt, None
+
+    start = jax.tree.map(jnp.zeros_like, pending)._replace(discount=jnp.ones_like(pending.discount))
+    new_pending, _ = jax.lax.scan(step, start, extended)
+    return extended, new_pending
 
 
 def _where_batch(pred: jax.Array, on_true: jax.Array, on_false: jax.Array) -> jax.Array:

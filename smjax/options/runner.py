@@ -10,7 +10,8 @@ whose template is satisfied or out of ticks is popped (with everything above it)
 
 Only the learner's own choices become training transitions (``decision``); its reward
 is the environment's reward when it is the root option, else ``satisfied`` of its
-template (F_o); the per-tick discount is gamma, or gamma**d for a teleported call.
+template (F_o); the per-tick discount is gamma, or gamma**d for a teleported call; the
+learner's episode (``done``) ends with the environment's or when its option ends.
 The machinery is generic: it sees the environment only through ``reset_env``,
 ``step_env`` and the templates of a :class:`~smjax.options.Hierarchy`.
 """
@@ -25,6 +26,7 @@ import numpy as np
 from flax import struct
 
 from smjax.agents.base import Transition
+from smjax.agents.smdp import no_pending
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.template import Parametric
@@ -45,6 +47,7 @@ class EnvCarry:
     stack: ExecutionStack
     learner_started: jax.Array  # bool: the learner has acted in this episode
     learner_return: jax.Array   # float: learner reward collected in this episode
+    pending: Transition         # the learner's decision still running at the last rollout end
 
 
 @struct.dataclass
@@ -160,7 +163,8 @@ class HierarchyRunner:
         obs, state = jax.vmap(self.env.reset_env, (0, None))(keys, self.env_params)
         stack = jax.vmap(lambda _: stack_init(self.D, controls.start))(jnp.arange(num_envs))
         zeros_b = jnp.zeros((num_envs,), bool)
-        return EnvCarry(state, obs, stack, zeros_b, jnp.zeros((num_envs,), jnp.float32))
+        return EnvCarry(state, obs, stack, zeros_b, jnp.zeros((num_envs,), jnp.float32),
+                        no_pending(obs, self.h.num_actions))
 
     # ---- the decision cascade (unbatched) -------------------------------------
     def _decide(self, stack, frozen_choice, learner_choice, controls: Controls, callable_):
@@ -264,7 +268,10 @@ class HierarchyRunner:
         # In evaluation (no learner) the whole episode counts, with the environment's reward.
         started = carry.learner_started | decided | (controls.learner < 0)
         ep_return = carry.learner_return + jnp.where(started, learner_reward, 0.0)
-        finished = reset & started
+        # The learner's episode is one run of its option: it ends with the environment's
+        # episode or when the option ends (the same tick unless episodes continue).
+        learner_done = reset | learner_ended
+        finished = learner_done & started
 
         obs_re, state_re = jax.vmap(self.env.reset_env, (0, None))(
             jax.random.split(k_reset, B), self.env_params)
@@ -273,13 +280,14 @@ class HierarchyRunner:
             env_state=jax.vmap(select_tree)(reset, state_re, state),
             obs=jax.vmap(select_tree)(reset, obs_re, obs),
             stack=jax.vmap(select_tree)(reset, fresh, stack),
-            learner_started=started & ~reset,
-            learner_return=jnp.where(reset, 0.0, ep_return),
+            learner_started=started & ~learner_done,
+            learner_return=jnp.where(learner_done, 0.0, ep_return),
+            pending=carry.pending,  # the engine updates it once per rollout (carry_pending)
         )
         transition = Transition(
             obs=carry.obs, action=act.action, action_mask=learner_mask, log_prob=act.log_prob,
             value=act.value, decision=decided, reward=jnp.where(started, learner_reward, 0.0),
-            discount=discount, done=reset,
+            discount=discount, done=learner_done,
         )
         # Success of a finished episode: the template's F_o (its return) for a template
         # learner; for the root, the environment's info["success"] where it reports one

@@ -12,6 +12,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from smjax.agents.smdp import carry_pending
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
@@ -90,7 +91,10 @@ class Engine:
 
             carry, (traj, stats) = jax.lax.scan(
                 tick_fn, st.carry, jax.random.split(k_roll, cfg.rollout_ticks))
-            learner_state, metrics = agent.update(st.learner, traj, carry.obs, k_upd)
+            # Decisions whose option still runs train in the next rollout, once complete.
+            traj, pending = carry_pending(carry.pending, traj)
+            carry = carry.replace(pending=pending)
+            learner_state, metrics = agent.update(st.learner, traj, k_upd)
             stats = jax.tree.map(lambda x: x.sum(0), stats)
             return SeedState(carry, learner_state, key), (stats, metrics)
 
