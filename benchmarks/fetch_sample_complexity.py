@@ -20,6 +20,7 @@ from pathlib import Path
 import smjax  # noqa: F401  (sets the XLA:CPU workaround before jax starts)
 from smjax.cli import _key_values
 from smjax.train import TrainConfig
+from smjax.train import checkpoint as ckpt
 from smjax.train.run import run
 from smjax.viz.plots import plot_curves
 
@@ -30,16 +31,12 @@ PAPER = {3: "4.5e5", 4: "6e5"}
 # its Q values O(10); gamma 0.96 per tick is the reference's per-decision discounts (0.2 for
 # an ~40-tick place, ~0.5 for a level-2 option) in SMDP form.
 #
-# Rollouts span a whole episode (50 N ticks) and decisions still open at a rollout's end
-# are dropped (store_incomplete false). A place_i option runs 23-51 ticks (80 at most);
-# with the former 16-tick rollouts *every* place decision was cut at the rollout end: its
-# SMDP return held <= 16 ticks of reward and bootstrapped from max Q over all actions
-# (the agent's rollout-end mask is all-True) in a mid-option state, where the actions the
-# root never takes (reach/pick/release, untrained) had the largest Q. The root never saw
-# what a place did, and stayed at a random root's score (CPU, 16 envs, 41k env steps:
-# greedy 0.12; whole-episode rollouts 0.32, and 1.0 with the paper_hold hierarchy below).
-# gradient_steps_per_update scales with the rollout (2 per tick, the former 32 per 16
-# ticks) so a budget buys the same gradient steps.
+# Rollouts are 16 ticks, shorter than a place_i option (23-51 ticks, 80 at most): a decision
+# whose option is still running at a rollout's end is carried into the next rollout and
+# trained once complete (smjax.agents.smdp.carry_pending). Before that fix every place
+# decision was cut at the rollout end and bootstrapped from a mid-option state, and the root
+# stayed at a random root's score (RESULTS section 7). gradient_steps_per_update scales
+# with the rollout, 2 per tick, so a budget buys the same gradient steps at any length.
 #
 # Top-down uses the ``paper_hold`` hierarchy by default: the root's "do nothing" is only
 # initiable once every block is in place (smjax/envs/fetch/templates.py says why);
@@ -51,11 +48,14 @@ GRAD_STEPS_PER_TICK = 2
 GAMMA = 0.96
 
 
+ROLLOUT_TICKS = 16
+
+
 def rollout_ticks_for(num_blocks: int, requested: int = 0) -> int:
-    """Ticks per rollout: ``requested`` or, by default, one whole episode (50 N ticks)."""
-    if requested < 0:
-        raise ValueError(f"--rollout-ticks must be >= 0, got {requested}")
-    return requested or 50 * num_blocks
+    """Ticks per rollout: ``requested``, or ``ROLLOUT_TICKS`` (0); ``-1``: one whole episode."""
+    if requested < -1:
+        raise ValueError(f"--rollout-ticks must be >= -1, got {requested}")
+    return 50 * num_blocks if requested == -1 else (requested or ROLLOUT_TICKS)
 
 
 def level_config(num_blocks: int, method: str, args, agent: dict) -> TrainConfig:
@@ -96,12 +96,14 @@ def main() -> None:
     ap.add_argument("--hierarchy", default="paper_hold",
                     help="hierarchy of top-down (default paper_hold; paper: root noop always allowed)")
     ap.add_argument("--rollout-ticks", type=int, default=0,
-                    help="ticks per rollout (default 0: one episode, 50 N; see AGENT's comment)")
+                    help="ticks per rollout (default 0: 16; -1: one whole episode, 50 N)")
     ap.add_argument("--agent", action="append", metavar="KEY=VALUE", help="DQN override (JSON values)")
     ap.add_argument("--set", action="append", metavar="FIELD=VALUE", help="TrainConfig override")
     ap.add_argument("--env", action="append", metavar="KEY=VALUE",
                     help="env override (default obs_include_goals=true)")
     ap.add_argument("--progress", action="store_true", help="progress bars per level")
+    ap.add_argument("--resume", action="store_true",
+                    help="continue runs whose directory under --out holds a checkpoint")
     ap.add_argument("--out", default="runs/fetch_sc")
     args = ap.parse_args()
     out = Path(args.out)
@@ -116,8 +118,9 @@ def main() -> None:
         for method in args.methods:
             cfg = level_config(n, method, args, agent)
             run_dir = out / f"stack{n}_{method}"
+            resume = args.resume and ckpt.load_meta(run_dir) is not None
             res = run(f"fetch/stack{n}", cfg, list(range(args.seeds)), run_dir, env_overrides=env_over,
-                      progress=args.progress)
+                      progress=args.progress, resume=resume)
             res.pop("_raw")
             summary.append(res)
             run_dirs.append(run_dir)

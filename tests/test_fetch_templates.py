@@ -107,6 +107,11 @@ def test_paper_hold_hierarchy_idles_only_once_the_tower_stands():
     hold_h = hier["paper_hold"]
     assert hold_h.children["stack"] == ("place_0", "place_1", "hold")
     assert hold_h.children["place_0"] == hier["paper"].children["place_0"]   # level 2 keeps noop
+    # paper_hold_all: no one-tick noop anywhere; place_i keeps only its three skills + hold
+    hold_all = hier["paper_hold_all"]
+    assert hold_all.children["stack"] == hold_h.children["stack"]
+    assert hold_all.children["place_1"] == ("reach_1", "pick_1", "release_1", "hold")
+    assert "noop" not in {c for children in hold_all.children.values() for c in children}
     hold = env.templates()["hold"]
     assert hold.k_max == 1 and hold.realisable
     _, state = env.reset_env(jax.random.PRNGKey(5), params)

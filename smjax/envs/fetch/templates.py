@@ -130,6 +130,8 @@ def make_hierarchies(env) -> dict:
 
     ``paper_hold``: ``paper`` with the root's ``noop`` replaced by ``hold`` (do nothing
     only once the tower stands; see the module docstring). Level 2 keeps ``noop``.
+    ``paper_hold_all``: ``hold`` at level 2 as well, which leaves a ``place_i`` learner no
+    do-nothing at all (``place_i`` runs only while block i is not in place).
     """
     n = env.num_blocks
     places = [f"place_{i}" for i in range(n)]
@@ -137,7 +139,10 @@ def make_hierarchies(env) -> dict:
     for i in range(n):
         paper[f"place_{i}"] = [f"reach_{i}", f"pick_{i}", f"release_{i}", "noop"]
     paper_hold = dict(paper, stack=places + ["hold"])
+    paper_hold_all = {name: [("hold" if c == "noop" else c) for c in children]
+                      for name, children in paper_hold.items()}
     flat = {"stack": [f"{k}_{i}" for i in range(n) for k in ("reach", "pick", "release")]
             + ["noop"]}
     return {"paper": declare(env, "stack", paper), "flat": declare(env, "stack", flat),
-            "paper_hold": declare(env, "stack", paper_hold)}
+            "paper_hold": declare(env, "stack", paper_hold),
+            "paper_hold_all": declare(env, "stack", paper_hold_all)}
