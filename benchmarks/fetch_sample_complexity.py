@@ -46,8 +46,6 @@ AGENT = {"hidden_sizes": [256, 256], "learning_rate": 5e-4,
          "target_update_period": 100, "buffer_capacity": 20000, "reward_scale": 0.1}
 GRAD_STEPS_PER_TICK = 2
 GAMMA = 0.96
-
-
 ROLLOUT_TICKS = 16
 
 

@@ -229,7 +229,8 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
         flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
         items = {"obs": flat(traj.obs), "action": flat(traj.action),
                  "reward": flat(tr.reward) * config.reward_scale, "discount": flat(tr.discount),
-                 "terminal": flat(tr.terminal), "next_obs": flat(tr.next_obs), "next_mask": flat(tr.next_mask)}
+                 "terminal": flat(tr.terminal), "next_obs": flat(tr.next_obs),
+                 "next_mask": flat(tr.next_mask)}
         num_decisions = tr.valid.sum().astype(jnp.int32)  # each counted once, when complete
         state = state.replace(
             buffer=insert(state.buffer, items, flat(tr.valid)),

@@ -3,10 +3,10 @@
 The rollout ``Transition[T, B]`` holds every tick; only ticks with a complete decision
 train (a decision pending at the rollout end returns as row 0 of the next rollout, see
 :mod:`smjax.agents.smdp`): every loss term is a mean over those ticks (the others weigh
-0), advantages come from :func:`smjax.agents.smdp.smdp_gae` and are normalised over decisions only.
-Minibatches partition the T*B ticks with the decisions dealt evenly among them (every
-minibatch gets the same number of decisions, +-1, however rarely the learner decides);
-the masked mean keeps each minibatch's loss a proper average, and a minibatch without
+0), advantages come from :func:`smjax.agents.smdp.smdp_gae` and are normalised over those
+decisions only. Minibatches partition the T*B ticks with the decisions dealt evenly among
+them (every minibatch gets the same number of decisions, +-1, however rarely the learner
+decides); the masked mean keeps each minibatch's loss a proper average, and a minibatch without
 any decision leaves the parameters and optimiser untouched. The compute is that of all
 T*B ticks (static shapes), so very sparse decisions cost as much as dense ones.
 
