@@ -76,8 +76,9 @@ def main() -> None:
         done = np.asarray(ends.finished)
         finished += int(done.sum())
         success += float(np.asarray(ends.success)[done].sum())
+    median = np.median(grip_to_goal1) if grip_to_goal1 else float("nan")
     print(f"place_1 first calls {first_calls}, block 0 in place at {block0_placed}; median grip to "
-          f"goal 1 {np.median(grip_to_goal1):.3f} m; random place_1 success "
+          f"goal 1 {median:.3f} m; random place_1 success "
           f"{success / max(finished, 1):.3f} over {finished} episodes", flush=True)
 
     # The whole hierarchy: root + learned place_0, place_1/place_2 scripted.
