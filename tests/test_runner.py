@@ -123,6 +123,27 @@ def test_evaluation_runner_never_teleports():
     assert not np.asarray(tr.decision).any()
 
 
+def test_learner_acting_frozen_takes_its_greedy_masked_choice():
+    # the acceptance gate's runner: the learner ignores its exploring act() (always "left")
+    # and picks as the bank would run it: argmax of its own scores among allowed actions
+    from types import SimpleNamespace
+
+    env = KeyDoor()
+    h = env.hierarchies()["paper"]
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions), gamma=GAMMA,
+                             frozen_policy="greedy", learner_acts_frozen=True)
+    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False, False]))
+    carry = runner.reset(jax.random.PRNGKey(0), controls, B)
+    bank = jnp.zeros((2, 4))
+    # scores prefer give_key (3), then use (2); give_key is masked out while the key is held
+    own = SimpleNamespace(params=jnp.asarray([0.0, 0.5, 1.0, 2.0]))
+    holding = np.arange(B) % 2 == 0
+    carry = carry.replace(env_state=carry.env_state.replace(has_key=jnp.asarray(holding)))
+    _, tr, _ = runner.tick(carry, jax.random.PRNGKey(1), own, bank, controls)
+    assert np.asarray(tr.decision).all()
+    np.testing.assert_array_equal(np.asarray(tr.action), np.where(holding, 2, 3))
+
+
 def test_frozen_policy_mode_is_validated():
     env = KeyDoor()
     h = env.hierarchies()["paper"]

@@ -27,6 +27,31 @@ def test_two_level_top_down_learns_and_works_without_teleports(top_down_run):
     # the final product executes its own learned give_key option: no teleports
     assert min(res["final_success"]) > 0.3
     assert all(e is not None and e > 0 for e in res["episodes_to_threshold"])
+    # every level ended through the gate: the frozen policy itself reached the threshold
+    for lvl in res["levels"]:
+        assert all(a >= 1 for a in lvl["gate_attempts"]) and min(lvl["gate_success"]) >= 0.8
+        assert all(n >= SMALL["eval_envs"] for n in lvl["gate_env_steps"])
+
+
+def test_a_level_does_not_end_on_exploration_luck():
+    # A DQN that never trains and explores uniformly (epsilon 1): with the scripted key-door
+    # templates its behaviour policy succeeds in every episode, so the running success
+    # passes the threshold at once. Its greedy policy is an untrained network's argmax.
+    agent = {"epsilon_start": 1.0, "epsilon_end": 1.0, "learning_starts": 10**9}
+    cfg = TrainConfig(algo="dqn", hierarchy="scripted", num_envs=32, rollout_ticks=16,
+                      updates_per_chunk=2, success_window=64, max_episodes_per_level=300,
+                      threshold=0.5, gate_envs=64, gate_interval=2, eval_envs=32, agent=agent)
+    root = run(make_keydoor(), cfg, [0, 1, 2], progress=False)["levels"][0]
+    assert min(root["final_running_success"]) >= 0.5  # every seed's exploration "passed"
+    for s in range(3):
+        # the level ends exactly when the frozen policy passes its gate
+        assert root["reached"][s] == (root["gate_success"][s] >= 0.5)
+        if not root["reached"][s]:  # trained on to its budget, the gate retried on the way
+            assert root["episodes"][s] >= 300 and root["gate_attempts"][s] >= 2
+    assert not all(root["reached"])  # some untrained greedy policies fail (seeds 0 and 2)
+    ungated = run(make_keydoor(), cfg.replace(gate=False, max_episodes_per_level=150), [0],
+                  progress=False)["levels"][0]
+    assert ungated["reached"] == [True] and ungated["gate_attempts"] == [0]
 
 
 def test_results_contract(top_down_run):
@@ -73,6 +98,9 @@ def test_baselines_run_through_the_same_engine(method):
     ("method", "sideways", "one of"),
     ("algo", "sarsa", "one of"),
     ("gamma", -0.1, "gamma"),
+    ("gate", "yes", "'gate' = 'yes': must be true or false"),
+    ("gate_envs", 0, "gate_envs"),
+    ("gate_interval", 0, "gate_interval"),
 ])
 def test_invalid_config_rejected_before_compile(field, value, message):
     with pytest.raises(ConfigError, match=message):

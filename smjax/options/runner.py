@@ -102,7 +102,8 @@ class HierarchyRunner:
 
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, gamma: float,
                  frozen_policy: str = "greedy", allow_teleport: bool = True,
-                 reset_on_learner_end: bool = True, frozen_temperature: float = 1.0):
+                 reset_on_learner_end: bool = True, frozen_temperature: float = 1.0,
+                 learner_acts_frozen: bool = False):
         if frozen_policy not in ("greedy", "sample"):
             raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {frozen_policy!r}")
         self.env, self.env_params, self.h, self.agent = env, env_params, hierarchy, agent
@@ -113,6 +114,9 @@ class HierarchyRunner:
         self.frozen_temperature = float(frozen_temperature)
         self.allow_teleport = bool(allow_teleport)
         self.reset_on_learner_end = bool(reset_on_learner_end)
+        # The learner picks as the bank will run it once frozen (greedy or sampled, per
+        # ``frozen_policy``) instead of exploring: the engine's level acceptance gate.
+        self.learner_acts_frozen = bool(learner_acts_frozen)
         tpls = hierarchy.template_list
         self.templates = tpls
         self.P = hierarchy.num_primitives
@@ -211,12 +215,13 @@ class HierarchyRunner:
         learner_idx = jnp.maximum(controls.learner, 0)
         learner_mask = masks[:, learner_idx]                                      # [B, A]
         act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
+        if self.learner_acts_frozen:
+            own = self.agent.policy_logits(learner_state.params, carry.obs)       # [B, A]
+            act = act._replace(action=self._frozen_pick(
+                jnp.where(learner_mask, own, -1e9), k_act).astype(act.action.dtype))
         logits = jax.vmap(self.agent.policy_logits, (0, None))(bank_params, carry.obs)  # [O, B, A]
         logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
-        if self.frozen_policy == "greedy":
-            frozen = jnp.argmax(logits, -1)
-        else:
-            frozen = jax.random.categorical(k_frozen, logits / self.frozen_temperature, -1)
+        frozen = self._frozen_pick(logits, k_frozen)
         frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)                     # [B, O]
 
         stack, primitive, teleported, scripted, decided = jax.vmap(
@@ -302,6 +307,12 @@ class HierarchyRunner:
             success=jnp.where(finished, success, 0.0), decided=decided,
         )
         return new_carry, transition, ends
+
+    def _frozen_pick(self, logits: jax.Array, key: jax.Array) -> jax.Array:
+        """A frozen policy's choice from masked scores (last axis): argmax or a sample."""
+        if self.frozen_policy == "greedy":
+            return jnp.argmax(logits, -1)
+        return jax.random.categorical(key, logits / self.frozen_temperature, -1)
 
     def _run_family(self, families, key, state, chosen, action, *, controls: bool):
         """Realise the template ``chosen[b]`` (option id, -1 for none) of each environment.

@@ -46,6 +46,17 @@ class TrainConfig:
         option being trained ends; its next episode starts wherever the frozen levels above
         call it again, i.e. on the states the full task gives it (football's ``attack`` is
         otherwise only trained from kick-offs). Default: reset, as the paper does.
+      gate: a level ends only when the policy that will be frozen passes too. Once a
+        seed's running success (of the exploring behaviour policy) reaches the threshold,
+        ``gate_envs`` fresh episodes run with the learner acting as it will in the policy
+        bank (greedy for dqn), called from reset states by the trained levels above; the
+        level ends if their success reaches the threshold, else training goes on and the
+        gate is tried again ``gate_interval`` chunks later. Without it a DQN level can end
+        on exploration luck (RESULTS section 7). Gate episodes train nothing and are
+        reported per level as ``gate_env_steps``, apart from the training counts.
+      gate_envs: episodes of one gate attempt (one per environment).
+      gate_max_ticks: cap on a gate attempt's length (an unfinished episode fails).
+      gate_interval: chunks between a seed's gate attempts.
       eval_envs: episodes run (one per environment) to measure final_success.
       eval_max_ticks: cap on an evaluation episode's length.
       tensorboard: also write TensorBoard event files (OUT/tensorboard) of every level's
@@ -67,6 +78,10 @@ class TrainConfig:
     gamma: float = 0.99
     frozen_policy: str = "auto"
     continue_episodes: bool = False
+    gate: bool = True
+    gate_envs: int = 256
+    gate_max_ticks: int = 2000
+    gate_interval: int = 8
     eval_envs: int = 256
     eval_max_ticks: int = 2000
     checkpoint_every: float = 60.0
@@ -86,7 +101,8 @@ class TrainConfig:
         need(self.algo in ALGOS, "algo", f"one of {ALGOS}")
         need(self.hierarchy is None or isinstance(self.hierarchy, str), "hierarchy", "a name or None")
         for name in ("num_envs", "rollout_ticks", "updates_per_chunk", "success_window",
-                     "max_episodes_per_level", "eval_envs", "eval_max_ticks"):
+                     "max_episodes_per_level", "eval_envs", "eval_max_ticks", "gate_envs",
+                     "gate_max_ticks", "gate_interval"):
             value = getattr(self, name)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, name,
                  "an integer >= 1")
@@ -98,6 +114,7 @@ class TrainConfig:
              "checkpoint_every", ">= 0 seconds")
         need(isinstance(self.tensorboard, bool), "tensorboard", "true or false")
         need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
+        need(isinstance(self.gate, bool), "gate", "true or false")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
         need(isinstance(self.max_steps_per_level, int) and not isinstance(self.max_steps_per_level, bool)
              and self.max_steps_per_level >= 0, "max_steps_per_level", "an integer >= 0 (0: no step budget)")

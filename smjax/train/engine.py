@@ -43,12 +43,18 @@ class Engine:
         # Evaluation: the final product alone, no teleports (leaf controllers still run).
         self.eval_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                            frozen_policy=mode, allow_teleport=False)
+        # Acceptance gate: the level's own setting (teleports above, calls from resets), but
+        # the learner acts as it will once frozen; a level ends only when this passes too.
+        self.gate_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
+                                           frozen_policy=mode, allow_teleport=True,
+                                           learner_acts_frozen=True)
         obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
         self.example_obs = obs
         self.num_actions = hierarchy.num_actions
         self.chunk = jax.jit(jax.vmap(self._chunk, in_axes=(0, 0, 0, 0, None, None)),
                              donate_argnums=(0,))
         self.evaluate = jax.jit(jax.vmap(self._evaluate, in_axes=(0, 0, 0, 0)))
+        self.gate = jax.jit(jax.vmap(self._gate, in_axes=(0, 0, 0, 0, None, None, None)))
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         self.reset = jax.jit(jax.vmap(self._reset, in_axes=(0, None)))
 
@@ -103,28 +109,45 @@ class Engine:
         stats = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), stats)
         return new, stats, metrics
 
-    # ---- evaluation of the trained hierarchy, no teleports -------------------------
-    def _evaluate(self, key, bank, learned, learner_state):
-        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned)
-        E = self.cfg.eval_envs
+    # ---- evaluation: one episode per environment, the first to finish -------------------
+    def _first_episodes(self, runner: HierarchyRunner, key, learner_state, bank, controls,
+                        num_envs: int, max_ticks: int) -> dict:
+        """Run ``num_envs`` environments until each has finished one learner episode (or
+        ``max_ticks``); each environment's first episode counts, so short episodes are not
+        over-represented, and one still unfinished at ``max_ticks`` counts as a failure."""
         k_reset, key = jax.random.split(key)
-        carry = self.eval_runner.reset(k_reset, controls, E)
-        dummy = learner_state  # never decides (no learner in evaluation); the tick needs one
+        carry = runner.reset(k_reset, controls, num_envs)
 
         def cond(c):
             _, _, done, _, _, t = c
-            return jnp.logical_and(~done.all(), t < self.cfg.eval_max_ticks)
+            return jnp.logical_and(~done.all(), t < max_ticks)
 
         def body(c):
             carry, key, done, ret, success, t = c
             key, k = jax.random.split(key)
-            carry, tr, ends = self.eval_runner.tick(carry, k, dummy, bank, controls)
-            first = ends.reset & ~done
+            carry, _, ends = runner.tick(carry, k, learner_state, bank, controls)
+            first = ends.finished & ~done
             ret = jnp.where(first, ends.ret, ret)
             success = jnp.where(first, ends.success, success)
-            return carry, key, done | ends.reset, ret, success, t + 1
+            return carry, key, done | ends.finished, ret, success, t + 1
 
-        zeros = jnp.zeros((E,), jnp.float32)
-        init = (carry, key, jnp.zeros((E,), bool), zeros, zeros, jnp.asarray(0))
-        _, _, done, ret, success, _ = jax.lax.while_loop(cond, body, init)
-        return {"return": ret.mean(), "success": success.mean(), "completed": done.mean()}
+        zeros = jnp.zeros((num_envs,), jnp.float32)
+        init = (carry, key, jnp.zeros((num_envs,), bool), zeros, zeros, jnp.asarray(0))
+        _, _, done, ret, success, ticks = jax.lax.while_loop(cond, body, init)
+        return {"return": ret.mean(), "success": success.mean(), "completed": done.mean(),
+                "env_steps": ticks * num_envs}
+
+    def _evaluate(self, key, bank, learned, learner_state):
+        """The trained hierarchy alone (root on the stack, no teleports, nobody learning)."""
+        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned)
+        # learner_state never decides (no learner in evaluation); the tick needs one
+        return self._first_episodes(self.eval_runner, key, learner_state, bank, controls,
+                                    self.cfg.eval_envs, self.cfg.eval_max_ticks)
+
+    def _gate(self, seed_key, state: SeedState, bank, learned, learner, start, attempt):
+        """The learner's option as it will be frozen, called where the levels above call it
+        (``attempt`` varies the episodes between attempts, deterministically)."""
+        controls = Controls(learner, start, learned)
+        key = jax.random.fold_in(seed_key, attempt)
+        return self._first_episodes(self.gate_runner, key, state.learner, bank, controls,
+                                    self.cfg.gate_envs, self.cfg.gate_max_ticks)

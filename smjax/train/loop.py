@@ -79,6 +79,12 @@ def running_success(history: list, window: int) -> float:
     return total / count if count >= window else float("nan")
 
 
+def _gate_counters(num_seeds: int) -> dict:
+    """A level's gate bookkeeping per seed (host state, checkpointed)."""
+    return {"gate_success": [None] * num_seeds, "gate_attempts": [0] * num_seeds,
+            "gate_env_steps": [0] * num_seeds, "gate_next": [0] * num_seeds}
+
+
 def _split_seeds(keys: jax.Array, n: int) -> list[jax.Array]:
     split = jax.vmap(lambda k: jax.random.split(k, n))(keys)
     return [split[:, i] for i in range(n)]
@@ -129,6 +135,7 @@ class HierarchyTrainer:
             "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": 0,
         }
         self._compiled = None
+        self._compiled_gate = None
         self._last_save = time.perf_counter()
         self.mesh = training_mesh(S, self.cfg.num_envs)
         self._place()
@@ -213,7 +220,8 @@ class HierarchyTrainer:
         self.arrays["state"] = SeedState(carry, learner, k_run)
         self._place()
         self.host.update(in_level=True, episodes=[0] * S, env_steps=[0] * S, reached=[False] * S,
-                         active=[True] * S, history=[[] for _ in range(S)], running=[None] * S)
+                         active=[True] * S, history=[[] for _ in range(S)], running=[None] * S,
+                         **_gate_counters(S))
 
     def _train_level(self, plan: LevelPlan, t_start: float) -> None:
         cfg, host = self.cfg, self.host
@@ -244,8 +252,17 @@ class HierarchyTrainer:
                     f"{max(host['episodes'])} episodes (chunk {host['chunks']}); the last good "
                     f"checkpoint is kept")
             self.arrays["state"] = state
-            self._account(plan, stats, steps_per_update)
+            candidates = self._account(plan, stats, steps_per_update)
             host["chunks"] += 1
+            passed = self._accept(plan, candidates, learner_arr, start_arr)
+            level_cfg = cfg.for_level(plan.name)
+            for s in range(len(self.seeds)):
+                if not host["active"][s]:
+                    continue
+                if s in passed:
+                    host["reached"][s], host["active"][s] = True, False
+                elif self._budget_spent(level_cfg, s):
+                    host["active"][s] = False
             host["wall_seconds"] = time.perf_counter() - t_start
             if bar is not None:
                 self._draw(bar, dt, steps_per_update)
@@ -259,8 +276,11 @@ class HierarchyTrainer:
         # clocks differ between processes, and saving is collective: process 0 decides
         return dist.agree(due) if self.cfg.checkpoint_every > 0 else due
 
-    def _account(self, plan: LevelPlan, stats, steps_per_update: int) -> None:
+    def _account(self, plan: LevelPlan, stats, steps_per_update: int) -> list[int]:
+        """Count a chunk's episodes and steps; the seeds whose running success reached the
+        threshold."""
         cfg, host = self.cfg.for_level(plan.name), self.host
+        candidates = []
         for s, seed in enumerate(self.seeds):
             if not host["active"][s]:
                 continue
@@ -288,10 +308,51 @@ class HierarchyTrainer:
             host["history"][s] = hist[len(hist) - keep:]
             run = host["running"][s]
             if run is not None and run >= cfg.threshold:
-                host["reached"][s], host["active"][s] = True, False
-            elif host["episodes"][s] >= cfg.max_episodes_per_level or (
-                    cfg.max_steps_per_level and host["env_steps"][s] >= cfg.max_steps_per_level):
-                host["active"][s] = False
+                candidates.append(s)
+        return candidates
+
+    def _budget_spent(self, cfg: TrainConfig, s: int) -> bool:
+        host = self.host
+        return host["episodes"][s] >= cfg.max_episodes_per_level or bool(
+            cfg.max_steps_per_level and host["env_steps"][s] >= cfg.max_steps_per_level)
+
+    def _accept(self, plan: LevelPlan, candidates: list[int], learner_arr, start_arr) -> list[int]:
+        """Seeds (of ``candidates``, whose running success reached the threshold) whose
+        level ends now: all of them without the gate; with it, those whose frozen policy
+        passes a gate attempt (tried every ``gate_interval`` chunks, and once more when
+        the budget is spent)."""
+        cfg, host = self.cfg.for_level(plan.name), self.host
+        if not cfg.gate or not candidates:
+            return candidates
+        for k, v in _gate_counters(len(self.seeds)).items():
+            host.setdefault(k, v)  # checkpoints written before the gate existed
+        due = [s for s in candidates
+               if host["chunks"] >= host["gate_next"][s] or self._budget_spent(cfg, s)]
+        if not due:
+            return []
+        counter = jnp.asarray(host["chunks"], jnp.uint32)
+        if self.mesh is not None and dist.is_multiprocess():
+            counter = dist.place(counter, seed_sharding(self.mesh, counter))
+        args = (self.arrays["keys"], self.arrays["state"], self.arrays["bank"],
+                self.arrays["learned"], learner_arr, start_arr, counter)
+        if self._compiled_gate is None:
+            t0 = time.perf_counter()
+            self._compiled_gate = self.engine.gate.lower(*args).compile()
+            host["compile_seconds"] += time.perf_counter() - t0
+        result = dist.gather(self._compiled_gate(*args))
+        passed = []
+        for s in due:
+            success = float(result["success"][s])
+            host["gate_success"][s] = success
+            host["gate_attempts"][s] += 1
+            host["gate_env_steps"][s] += int(result["env_steps"][s])
+            host["gate_next"][s] = host["chunks"] + cfg.gate_interval
+            if self._tb is not None:
+                self._tb.add_scalar(f"seed_{self.seeds[s]}/level_{plan.level}_{plan.name}/gate_success",
+                                    success, host["env_steps"][s])
+            if success >= cfg.threshold:
+                passed.append(s)
+        return passed
 
     def _finish_level(self, plan: LevelPlan) -> None:
         host, arrays = self.host, self.arrays
@@ -303,6 +364,10 @@ class HierarchyTrainer:
             "template": plan.name, "level": plan.level, "episodes": list(host["episodes"]),
             "env_steps": list(host["env_steps"]), "reached": list(host["reached"]),
             "final_running_success": list(host["running"]),
+            # the last gate attempt's success (None: never tried), attempts, env steps spent
+            "gate_success": list(host.get("gate_success", [])),
+            "gate_attempts": list(host.get("gate_attempts", [])),
+            "gate_env_steps": list(host.get("gate_env_steps", [])),
         })
         host["plan_index"] += 1
         host["in_level"] = False
@@ -322,7 +387,9 @@ class HierarchyTrainer:
         bar.n = int(min(np.mean(host["episodes"]), self._bar_total))
         rate = self.cfg.updates_per_chunk * steps_per_update * len(self.seeds) / max(dt, 1e-9)
         runs = [r for r in host["running"] if r is not None]
-        bar.set_postfix(success=f"{np.mean(runs) if runs else 0:.2f}",
+        gates = [g for g in host.get("gate_success", []) if g is not None]
+        extra = {"gate": f"{np.mean(gates):.2f}"} if gates else {}
+        bar.set_postfix(success=f"{np.mean(runs) if runs else 0:.2f}", **extra,
                         done=f"{len(self.seeds) - sum(host['active'])}/{len(self.seeds)}",
                         steps_s=f"{rate:,.0f}")
         bar.refresh()
