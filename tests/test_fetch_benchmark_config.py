@@ -39,6 +39,8 @@ def test_default_rollouts_are_shorter_than_a_place_option(blocks, method):
     assert cfg.max_steps_per_level == (1_200_000 if method == "flat" else 300_000)
     # top-down's root may idle only once the tower stands; flat keeps its own hierarchy
     assert cfg.hierarchy == (None if method == "flat" else "paper_hold")
+    # levels end on the frozen greedy policy, judged on whole episodes
+    assert cfg.gate and cfg.gate_max_ticks >= 50 * blocks
 
 
 def test_explicit_rollout_and_agent_override_win():
