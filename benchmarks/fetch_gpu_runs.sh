@@ -1,24 +1,42 @@
-# Fetch sample complexity on one GPU (benchmarks/RESULTS.md section 7): the four (blocks,
-# method) runs of fetch_sample_complexity.py side by side, resumable (each call continues the
-# checkpointed runs under runs/gpu). JOBS picks runs (default "td3 fl3 td4 fl4"), T the
-# per-call time limit in seconds, EXTRA more flags. Needs the mujoco/mjx/brax wheels in .whl (device README).
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl && export PYTHONPATH=/tmp/site:$PWD || exit
-export XLA_PYTHON_CLIENT_PREALLOCATE=false PYTHONUNBUFFERED=1
-nvidia-smi --query-gpu=name --format=csv,noheader
-B=benchmarks/fetch_sample_complexity.py
+# Fetch sample complexity on one GPU (benchmarks/RESULTS.md section 7): the (blocks, method)
+# runs of fetch_sample_complexity.py, one after another (one run alone trains ~11k env
+# steps/s on an H100; two sharing the GPU get ~4k each). JOBS picks runs (default
+# "fl3 td3 fl4 td4"), EXTRA adds flags. Needs the mujoco/mjx/brax wheels in .whl (device README).
+#
+# A device call lasts at most 10 minutes but a machine stays up to 30: the first call
+# (MODE=start) detaches the queue with setsid so it runs on between calls; later calls
+# (MODE=status) show progress and copy results to $OUT. MODE=run trains in the
+# foreground, resuming checkpointed runs under runs/gpu (T: time limit per run, seconds).
 R=runs/gpu
+MODE=${MODE:-status}
+JOBS=${JOBS:-"fl3 td3 fl4 td4"}
 mkdir -p $R
-T=${T:-560}
-JOBS=${JOBS:-"td3 fl3 td4 fl4"}
-for name in $JOBS; do
-  case $name in td*) method=top-down;; fl*) method=flat;; esac
-  set -- $name ${name: -1} $method
-  timeout $T python $B --blocks $2 --methods $3 --seeds 5 --num-envs 32 --flat-max-steps 600000 --progress --resume $EXTRA --out $R/$1 >> $R/$1.log 2>&1 &
-done
-wait
+if [ "$MODE" != status ]; then
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit
+fi
+export PYTHONPATH=/tmp/site:$PWD XLA_PYTHON_CLIENT_PREALLOCATE=false PYTHONUNBUFFERED=1
+export JAX_COMPILATION_CACHE_DIR=$PWD/$R/jax_cache JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=1
+train() {  # one run: $1 = name (td3, fl4, ...)
+  case $1 in td*) method=top-down;; fl*) method=flat;; esac
+  timeout ${T:-100000} python benchmarks/fetch_sample_complexity.py --blocks ${1: -1} --methods $method \
+    --seeds 5 --num-envs 32 --flat-max-steps 600000 --progress --resume $EXTRA --out $R/$1 >> $R/$1.log 2>&1
+  echo "$1 exit $? $(date +%T)" >> $R/queue.log
+}
+case $MODE in
+  start) nvidia-smi --query-gpu=name --format=csv,noheader
+         export -f train; export R T EXTRA
+         setsid bash -c "for j in $JOBS; do train \$j; done; echo queue done >> $R/queue.log" \
+           > /dev/null 2>&1 < /dev/null &
+         sleep ${WAIT:-0};;
+  run)   for j in $JOBS; do train $j; done;;
+esac
+cat $R/queue.log 2>/dev/null
+# $OUT takes few files: everything goes back in one archive (results, or the last checkpoint's
+# host state while a run is unfinished, its table, curves and log)
 for f in $JOBS; do
-  mkdir -p $OUT/$f; cp $R/$f/table.md $R/$f/summary.json $R/$f/*.png $OUT/$f/ 2>/dev/null
-  # results when finished; else the host state of the last checkpoint (levels done, curves)
-  for d in $R/$f/stack*; do [ -d $d ] && mkdir -p $OUT/$f/$(basename $d) && cp $d/results.json $d/curves.csv $d/checkpoints/latest.json $OUT/$f/$(basename $d)/ 2>/dev/null; done
-  echo "== $f"; tr '\r' '\n' < $R/$f.log | grep -v -i warp | grep -E "level|it/s|\|" | awk 'NR%15==0' | tail -8; tr '\r' '\n' < $R/$f.log | grep -E "^\| [34]"
+  [ -f $R/$f.log ] || continue
+  echo "== $f"; tr '\r' '\n' < $R/$f.log | grep -v -i warp | grep -E "level|it/s|\|" | tail -3
+  tr '\r' '\n' < $R/$f.log | grep -E "^\| [34]"
 done
+[ -n "$OUT" ] && tar czf $OUT/fetch_runs.tgz --exclude='*/jax_cache' --exclude='*/checkpoints/step-*' \
+  $(ls -d $R/*/ $R/*.log 2>/dev/null | grep -v jax_cache) 2>/dev/null
