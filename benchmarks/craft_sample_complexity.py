@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
+import os
+import sys
 from pathlib import Path
 
 import smjax  # noqa: F401  (sets the XLA:CPU workaround before jax starts)
@@ -19,19 +20,14 @@ from smjax.train import TrainConfig
 from smjax.train.run import run
 from smjax.viz.plots import plot_curves
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _stats import mean_std, reached_summary  # noqa: E402
+
 PAPER = {"get_gem": (12826, 2613), "get_gold": (10516, 2833), "make_axe": (11283, 2255),
          "make_stick": (5026, 2231), "make_bridge": (7974, 1853)}
 PAPER_CURRICULUM = {"get_gem": "> 3e6", "get_gold": "> 2.65e6", "make_axe": "> 2.7e6",
                     "make_stick": "> 1.3e6", "make_bridge": "> 1.8e6"}
 
-
-def _fmt(values):
-    got = [v for v in values if v is not None]
-    if not got:
-        return f"not reached (0/{len(values)})"
-    mean = statistics.mean(got)
-    std = statistics.pstdev(got) if len(got) > 1 else 0.0
-    return f"{mean:,.0f} +- {std:,.0f} ({len(got)}/{len(values)})"
 
 
 def main() -> None:
@@ -70,8 +66,8 @@ def main() -> None:
             fs = res["final_success"]
             paper = PAPER.get(task)
             table.append(
-                f"| {task} | {method} | {_fmt(res['episodes_to_threshold'])} | {_fmt(res['env_steps_to_threshold'])} "
-                f"| {statistics.mean(fs):.2f} +- {statistics.pstdev(fs):.2f} | {res['wall_seconds']:.0f} "
+                f"| {task} | {method} | {reached_summary(res['episodes_to_threshold'])} | {reached_summary(res['env_steps_to_threshold'])} "
+                f"| {'{:.2f} +- {:.2f}'.format(*mean_std(fs))} | {res['wall_seconds']:.0f} "
                 f"| {res['compile_seconds']:.0f} | {f'{paper[0]:,} +- {paper[1]:,}' if paper else '-'} "
                 f"| {PAPER_CURRICULUM.get(task, '-')} |")
             print(table[-1], flush=True)

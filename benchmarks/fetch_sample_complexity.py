@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
+import os
+import sys
 from pathlib import Path
 
 import smjax  # noqa: F401  (sets the XLA:CPU workaround before jax starts)
@@ -23,6 +24,9 @@ from smjax.train import TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.run import run
 from smjax.viz.plots import plot_curves
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _stats import mean_std, reached_summary  # noqa: E402
 
 # env steps to average score 1 (the paper's Figure; flat is stuck near 1/3 there)
 PAPER = {3: "4.5e5", 4: "6e5"}
@@ -79,13 +83,6 @@ def level_config(num_blocks: int, method: str, args, agent: dict) -> TrainConfig
     return TrainConfig(**(fields | _key_values(args.set, "--set")))
 
 
-def _fmt(values):
-    got = [v for v in values if v is not None]
-    if not got:
-        return f"not reached (0/{len(values)})"
-    std = statistics.pstdev(got) if len(got) > 1 else 0.0
-    return f"{statistics.mean(got):,.0f} +- {std:,.0f} ({len(got)}/{len(values)})"
-
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -134,8 +131,8 @@ def main() -> None:
             fs = res["final_success"]
             gate_steps = [sum(lvl.get("gate_env_steps") or [0]) / args.seeds for lvl in res["levels"]]
             table.append(
-                f"| {n} | {method} | {_fmt(res['env_steps_to_threshold'])} | {sum(gate_steps):,.0f} "
-                f"| {statistics.mean(fs):.2f} +- {statistics.pstdev(fs):.2f} | {res['wall_seconds']:.0f} "
+                f"| {n} | {method} | {reached_summary(res['env_steps_to_threshold'])} | {sum(gate_steps):,.0f} "
+                f"| {'{:.2f} +- {:.2f}'.format(*mean_std(fs))} | {res['wall_seconds']:.0f} "
                 f"| {res['compile_seconds']:.0f} | {PAPER.get(n, '-') if method == 'top-down' else '~1/3 score'} |")
             print(table[-1], flush=True)
             (out / "table.md").write_text("\n".join(table) + "\n")

@@ -31,13 +31,18 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
+import sys
 import time
 from pathlib import Path
 
 import smjax  # noqa: F401  (sets the XLA:CPU workaround before jax starts)
 from smjax.train import TrainConfig
 from smjax.train.run import run
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _stats import mean_std  # noqa: E402
 
 DIFFICULTIES = ("easy", "medium", "hard")
 METHODS = ("top-down", "flat")
@@ -109,9 +114,6 @@ def train(task: str, cfg: TrainConfig, seeds: list[int], env_overrides: dict, *,
     res.pop("_raw")
     return res
 
-
-def mean_std(values: list[float]) -> tuple[float, float]:
-    return statistics.mean(values), (statistics.pstdev(values) if len(values) > 1 else 0.0)
 
 
 def train_one(difficulty: str, method: str, args, agent: dict) -> dict:

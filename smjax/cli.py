@@ -68,7 +68,8 @@ def _add_train(sub):
     p.add_argument("--env", action="append", metavar="KEY=VALUE", help="environment override")
     p.add_argument("--hierarchy", default=None, help="hierarchy name (see `smjax list --hierarchies`)")
     p.add_argument("--num-envs", type=int, default=None, help="parallel environments per seed")
-    p.add_argument("--threshold", type=float, default=None, help="success threshold per level (0, 1]; a level ends when its running success "
+    p.add_argument("--threshold", type=float, default=None,
+                   help="success threshold per level (0, 1]; a level ends when its running success "
                         "reaches it and the frozen policy passes it on fresh episodes (--set "
                         "gate=false: running success alone)")
     p.add_argument("--max-episodes", type=int, default=None, help="episode budget per level")

@@ -54,7 +54,7 @@ class Engine:
         self.chunk = jax.jit(jax.vmap(self._chunk, in_axes=(0, 0, 0, 0, None, None)),
                              donate_argnums=(0,))
         self.evaluate = jax.jit(jax.vmap(self._evaluate, in_axes=(0, 0, 0, 0)))
-        self.gate = jax.jit(jax.vmap(self._gate, in_axes=(0, 0, 0, 0, None, None, None)))
+        self.gate = jax.jit(jax.vmap(self._gate, in_axes=(0, 0, 0, 0, None, None, None, 0)))
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         self.reset = jax.jit(jax.vmap(self._reset, in_axes=(0, None)))
 
@@ -111,10 +111,12 @@ class Engine:
 
     # ---- evaluation: one episode per environment, the first to finish -------------------
     def _first_episodes(self, runner: HierarchyRunner, key, learner_state, bank, controls,
-                        num_envs: int, max_ticks: int) -> dict:
+                        num_envs: int, max_ticks: int, skip=False) -> dict:
         """Run ``num_envs`` environments until each has finished one learner episode (or
         ``max_ticks``); each environment's first episode counts, so short episodes are not
-        over-represented, and one still unfinished at ``max_ticks`` counts as a failure."""
+        over-represented, and one still unfinished at ``max_ticks`` counts as a failure.
+        ``skip``: start as finished (under ``vmap`` a skipped seed does not keep the loop
+        running for the others; its result is meaningless)."""
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
 
@@ -132,7 +134,7 @@ class Engine:
             return carry, key, done | ends.finished, ret, success, t + 1
 
         zeros = jnp.zeros((num_envs,), jnp.float32)
-        init = (carry, key, jnp.zeros((num_envs,), bool), zeros, zeros, jnp.asarray(0))
+        init = (carry, key, jnp.full((num_envs,), skip, bool), zeros, zeros, jnp.asarray(0))
         _, _, done, ret, success, ticks = jax.lax.while_loop(cond, body, init)
         return {"return": ret.mean(), "success": success.mean(), "completed": done.mean(),
                 "env_steps": ticks * num_envs}
@@ -144,10 +146,11 @@ class Engine:
         return self._first_episodes(self.eval_runner, key, learner_state, bank, controls,
                                     self.cfg.eval_envs, self.cfg.eval_max_ticks)
 
-    def _gate(self, seed_key, state: SeedState, bank, learned, learner, start, attempt):
+    def _gate(self, seed_key, state: SeedState, bank, learned, learner, start, attempt, due):
         """The learner's option as it will be frozen, called where the levels above call it
-        (``attempt`` varies the episodes between attempts, deterministically)."""
+        (``attempt`` varies the episodes between attempts, deterministically; a seed not
+        ``due`` is skipped)."""
         controls = Controls(learner, start, learned)
         key = jax.random.fold_in(seed_key, attempt)
         return self._first_episodes(self.gate_runner, key, state.learner, bank, controls,
-                                    self.cfg.gate_envs, self.cfg.gate_max_ticks)
+                                    self.cfg.gate_envs, self.cfg.gate_max_ticks, skip=~due)

@@ -226,6 +226,7 @@ class HierarchyTrainer:
     def _train_level(self, plan: LevelPlan, t_start: float) -> None:
         cfg, host = self.cfg, self.host
         steps_per_update = cfg.num_envs * cfg.rollout_ticks
+        level_cfg = cfg.for_level(plan.name)
         bar = self._bar(plan)
         learner_arr, start_arr = jnp.asarray(plan.option), jnp.asarray(plan.start)
         if self.mesh is not None and dist.is_multiprocess():
@@ -255,7 +256,6 @@ class HierarchyTrainer:
             candidates = self._account(plan, stats, steps_per_update)
             host["chunks"] += 1
             passed = self._accept(plan, candidates, learner_arr, start_arr)
-            level_cfg = cfg.for_level(plan.name)
             for s in range(len(self.seeds)):
                 if not host["active"][s]:
                     continue
@@ -331,14 +331,18 @@ class HierarchyTrainer:
         if not due:
             return []
         counter = jnp.asarray(host["chunks"], jnp.uint32)
-        if self.mesh is not None and dist.is_multiprocess():
-            counter = dist.place(counter, seed_sharding(self.mesh, counter))
+        due_mask = jnp.asarray([s in due for s in range(len(self.seeds))])
+        if self.mesh is not None:
+            due_mask = dist.place(due_mask, seed_sharding(self.mesh, due_mask))
+            if dist.is_multiprocess():
+                counter = dist.place(counter, seed_sharding(self.mesh, counter))
         args = (self.arrays["keys"], self.arrays["state"], self.arrays["bank"],
-                self.arrays["learned"], learner_arr, start_arr, counter)
+                self.arrays["learned"], learner_arr, start_arr, counter, due_mask)
         if self._compiled_gate is None:
             t0 = time.perf_counter()
             self._compiled_gate = self.engine.gate.lower(*args).compile()
             host["compile_seconds"] += time.perf_counter() - t0
+        # one vmapped call for all seeds; those not due are skipped (their results unused)
         result = dist.gather(self._compiled_gate(*args))
         passed = []
         for s in due:
@@ -348,8 +352,8 @@ class HierarchyTrainer:
             host["gate_env_steps"][s] += int(result["env_steps"][s])
             host["gate_next"][s] = host["chunks"] + cfg.gate_interval
             if self._tb is not None:
-                self._tb.add_scalar(f"seed_{self.seeds[s]}/level_{plan.level}_{plan.name}/gate_success",
-                                    success, host["env_steps"][s])
+                tag = f"seed_{self.seeds[s]}/level_{plan.level}_{plan.name}"
+                self._tb.add_scalar(f"{tag}/gate_success", success, host["env_steps"][s])
             if success >= cfg.threshold:
                 passed.append(s)
         return passed
