@@ -38,19 +38,20 @@ def test_a_level_does_not_end_on_exploration_luck():
     # templates its behaviour policy succeeds in every episode, so the running success
     # passes the threshold at once. Its greedy policy is an untrained network's argmax.
     agent = {"epsilon_start": 1.0, "epsilon_end": 1.0, "learning_starts": 10**9}
+    # (only the root is examined: give_key's level gets a budget of one chunk)
     cfg = TrainConfig(algo="dqn", hierarchy="scripted", num_envs=32, rollout_ticks=16,
-                      updates_per_chunk=2, success_window=64, max_episodes_per_level=300,
-                      threshold=0.5, gate_envs=64, gate_interval=2, eval_envs=32, agent=agent)
+                      updates_per_chunk=2, success_window=64, max_episodes_per_level=160,
+                      threshold=0.5, gate_envs=64, gate_interval=1, eval_envs=32, agent=agent,
+                      levels={"give_key": {"max_episodes_per_level": 1}})
     root = run(make_keydoor(), cfg, [0, 1, 2], progress=False)["levels"][0]
     assert min(root["final_running_success"]) >= 0.5  # every seed's exploration "passed"
     for s in range(3):
         # the level ends exactly when the frozen policy passes its gate
         assert root["reached"][s] == (root["gate_success"][s] >= 0.5)
         if not root["reached"][s]:  # trained on to its budget, the gate retried on the way
-            assert root["episodes"][s] >= 300 and root["gate_attempts"][s] >= 2
+            assert root["episodes"][s] >= 160 and root["gate_attempts"][s] >= 2
     assert not all(root["reached"])  # some untrained greedy policies fail (seeds 0 and 2)
-    ungated = run(make_keydoor(), cfg.replace(gate=False, max_episodes_per_level=150), [0],
-                  progress=False)["levels"][0]
+    ungated = run(make_keydoor(), cfg.replace(gate=False), [0], progress=False)["levels"][0]
     assert ungated["reached"] == [True] and ungated["gate_attempts"] == [0]
 
 
