@@ -7,6 +7,13 @@
 # (MODE=start) detaches the queue with setsid so it runs on between calls; later calls
 # (MODE=status) show progress and copy results to $OUT. MODE=run trains in the
 # foreground, resuming checkpointed runs under runs/gpu (T: time limit per run, seconds).
+#
+# A run longer than one machine (4-block top-down: ~35 min) moves to the next machine at a
+# level boundary. Runs here checkpoint only there (checkpoint_every=1e9), where the checkpoint
+# holds the next level's empty replay buffer and is a few MB. Before the machine goes back,
+# MODE=status HOP=1 also returns each job's latest checkpoint (hop.tgz.part-*); here, in the
+# repo root, `cat /work/.device/N/hop.tgz.part-* | tar xzf -`, then MODE=start JOBS=td4 again
+# with carry [".whl", "runs/gpu/td4"]: it resumes (--resume) where the checkpoint left off.
 R=runs/gpu
 MODE=${MODE:-status}
 JOBS=${JOBS:-"fl3 td3 fl4 td4"}
@@ -19,7 +26,8 @@ export JAX_COMPILATION_CACHE_DIR=$PWD/$R/jax_cache JAX_PERSISTENT_CACHE_MIN_COMP
 train() {  # one run: $1 = name (td3, fl4, ...)
   case $1 in td*) method=top-down;; fl*) method=flat;; esac
   timeout ${T:-100000} python benchmarks/fetch_sample_complexity.py --blocks ${1: -1} --methods $method \
-    --seeds 5 --num-envs 32 --flat-max-steps 600000 --progress --resume $EXTRA --out $R/$1 >> $R/$1.log 2>&1
+    --seeds 5 --num-envs 32 --flat-max-steps 600000 --progress --resume --set checkpoint_every=1e9 \
+    $EXTRA --out $R/$1 >> $R/$1.log 2>&1
   echo "$1 exit $? $(date +%T)" >> $R/queue.log
 }
 case $MODE in
@@ -40,3 +48,19 @@ for f in $JOBS; do
 done
 [ -n "$OUT" ] && tar czf $OUT/fetch_runs.tgz --exclude='*/jax_cache' --exclude='*/checkpoints/step-*' \
   $(ls -d $R/*/ $R/*.log 2>/dev/null | grep -v jax_cache) 2>/dev/null
+if [ -n "$OUT" ] && [ -n "$HOP" ]; then
+  mkdir -p /tmp/hop && rm -rf /tmp/hop/*
+  for f in $JOBS; do
+    for c in $R/$f/*/checkpoints; do  # latest.json and the step it names, unless a save moved it
+      [ -f $c/latest.json ] || continue
+      for try in 1 2 3; do
+        s=$(python3 -c "import json,sys;print(json.load(open(sys.argv[1]))['path'])" $c/latest.json)
+        mkdir -p /tmp/hop/$c && cp $c/latest.json /tmp/hop/$c/ && cp -r $c/$s /tmp/hop/$c/ \
+          && cmp -s $c/latest.json /tmp/hop/$c/latest.json && break
+        rm -rf /tmp/hop/$c
+      done
+    done
+  done
+  (cd /tmp/hop && tar cf - runs | gzip -1 | split -b 15M - $OUT/hop.tgz.part-)
+  du -sh /tmp/hop/$R/*/*/checkpoints 2>/dev/null
+fi

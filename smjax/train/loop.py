@@ -181,6 +181,8 @@ class HierarchyTrainer:
         else:
             self.arrays = ckpt.load_arrays(self.out_dir, self.arrays)
         self.host = info["meta"]["host"]
+        for k, v in _gate_counters(len(self.seeds)).items():
+            self.host.setdefault(k, v)  # checkpoints written before the gate existed
         self._place()
         return True
 
@@ -193,6 +195,11 @@ class HierarchyTrainer:
                 self._start_level(plan)
             self._train_level(plan, t_start)
             self._finish_level(plan)
+            if self.host["plan_index"] < len(self.plans):
+                # start the next level before checkpointing: the checkpoint then holds its fresh
+                # learner (an empty replay buffer, which compresses to nothing), not the finished
+                # one, so a level-boundary checkpoint is small enough to move between machines
+                self._start_level(self.plans[self.host["plan_index"]])
             self.host["wall_seconds"] = time.perf_counter() - t_start
             self.save()
         keys, k_eval = _split_seeds(_local(self.arrays["keys"]), 2)
@@ -324,8 +331,6 @@ class HierarchyTrainer:
         cfg, host = self.cfg.for_level(plan.name), self.host
         if not cfg.gate or not candidates:
             return candidates
-        for k, v in _gate_counters(len(self.seeds)).items():
-            host.setdefault(k, v)  # checkpoints written before the gate existed
         due = [s for s in candidates
                if host["chunks"] >= host["gate_next"][s] or self._budget_spent(cfg, s)]
         if not due:
@@ -369,9 +374,9 @@ class HierarchyTrainer:
             "env_steps": list(host["env_steps"]), "reached": list(host["reached"]),
             "final_running_success": list(host["running"]),
             # the last gate attempt's success (None: never tried), attempts, env steps spent
-            "gate_success": list(host.get("gate_success", [])),
-            "gate_attempts": list(host.get("gate_attempts", [])),
-            "gate_env_steps": list(host.get("gate_env_steps", [])),
+            "gate_success": list(host["gate_success"]),
+            "gate_attempts": list(host["gate_attempts"]),
+            "gate_env_steps": list(host["gate_env_steps"]),
         })
         host["plan_index"] += 1
         host["in_level"] = False
@@ -391,7 +396,7 @@ class HierarchyTrainer:
         bar.n = int(min(np.mean(host["episodes"]), self._bar_total))
         rate = self.cfg.updates_per_chunk * steps_per_update * len(self.seeds) / max(dt, 1e-9)
         runs = [r for r in host["running"] if r is not None]
-        gates = [g for g in host.get("gate_success", []) if g is not None]
+        gates = [g for g in host["gate_success"] if g is not None]
         extra = {"gate": f"{np.mean(gates):.2f}"} if gates else {}
         bar.set_postfix(success=f"{np.mean(runs) if runs else 0:.2f}", **extra,
                         done=f"{len(self.seeds) - sum(host['active'])}/{len(self.seeds)}",
