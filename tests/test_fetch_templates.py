@@ -114,7 +114,8 @@ def test_paper_hold_hierarchy_idles_only_once_the_tower_stands():
     assert "noop" not in {c for children in hold_all.children.values() for c in children}
     hold = env.templates()["hold"]
     assert hold.k_max == 1 and hold.realisable
-    _, state = env.reset_env(jax.random.PRNGKey(5), params)
+    # jitted: op-by-op MJX on the CPU takes over a minute, one compile about ten seconds
+    _, state = jax.jit(env.reset_env)(jax.random.PRNGKey(5), params)
     assert not bool(hold.initiation(state, params))          # reset: nothing placed
     assert not bool(hold.satisfied(state, params))
     # Put every block on its goal: now (and only now) the root may do nothing.

@@ -3,6 +3,13 @@
 The notebooks are committed without outputs; a notebook that raises in any cell fails its
 test with the cell's error. ``fetch.ipynb`` compiles MuJoCo MJX on the CPU (minutes), so
 it is marked slow.
+
+The notebooks that train run with smaller budgets here (see ``_CAP_TRAINING``): a cell
+injected before the first one wraps ``smjax.train.run`` so that every training run keeps
+its task, method, algorithm, shapes, seeds and outputs but stops after at most
+``CAP_EPISODES`` episodes per level and gates on at most ``CAP_GATE_ENVS`` episodes.
+Every cell still executes; what the full budgets learn is measured by the benchmarks and
+by tests/test_train.py, not here.
 """
 from __future__ import annotations
 
@@ -19,6 +26,25 @@ NOTEBOOKS = Path(__file__).resolve().parent.parent / "notebooks"
 FAST = ["quickstart", "custom_env", "football", "craft"]
 SLOW = ["fetch"]
 CELL_TIMEOUT_S = 900  # generous: the machine running the suite may be shared
+TRAINS = {"quickstart", "custom_env", "craft"}  # notebooks whose cells call smjax.train.run
+CAP_EPISODES = 300
+CAP_GATE_ENVS = 32
+CAPPED = "[test_notebooks] training budget capped"
+_CAP_TRAINING = f"""\
+import smjax.train as _smjax_train
+
+_full_run = _smjax_train.run
+
+
+def _capped_run(task, cfg, *args, **kwargs):
+    cfg = cfg.replace(max_episodes_per_level=min(cfg.max_episodes_per_level, {CAP_EPISODES}),
+                      gate_envs=min(cfg.gate_envs, {CAP_GATE_ENVS}))
+    print({CAPPED!r})
+    return _full_run(task, cfg, *args, **kwargs)
+
+
+_smjax_train.run = _capped_run  # the notebooks import run from smjax.train after this
+"""
 
 
 def test_every_notebook_is_covered_and_committed_without_outputs():
@@ -34,6 +60,8 @@ def test_every_notebook_is_covered_and_committed_without_outputs():
 
 def _execute(name: str, workdir: Path) -> None:
     nb = nbformat.read(NOTEBOOKS / f"{name}.ipynb", as_version=4)
+    if name in TRAINS:
+        nb.cells.insert(0, nbformat.v4.new_code_cell(_CAP_TRAINING))
     env = dict(os.environ, JAX_PLATFORMS="cpu", MPLBACKEND="Agg")
     client = nbclient.NotebookClient(nb, timeout=CELL_TIMEOUT_S, kernel_name="python3",
                                      resources={"metadata": {"path": str(workdir)}})
@@ -48,6 +76,10 @@ def _execute(name: str, workdir: Path) -> None:
     errors = [out for cell in nb.cells if cell.cell_type == "code"
               for out in cell.outputs if out.get("output_type") == "error"]
     assert not errors, errors
+    if name in TRAINS:  # the cap took effect (the notebook still imports run from smjax.train)
+        printed = "".join(out.get("text", "") for cell in nb.cells if cell.cell_type == "code"
+                          for out in cell.outputs if out.get("output_type") == "stream")
+        assert CAPPED in printed, f"{name}.ipynb trained without the test's budget cap"
 
 
 @pytest.mark.parametrize("name", FAST)

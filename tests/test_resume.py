@@ -60,12 +60,15 @@ def test_sigkill_then_resume_equals_uninterrupted(tmp_path):
 
 def test_resume_with_different_config_is_refused(tmp_path):
     out = tmp_path / "run"
-    run(make_keydoor(), TrainConfig(**(CFG | {"max_episodes_per_level": 200})), [0], out, progress=False)
+    # seeds [0, 1]: the compiled program of the test above (the suite's compilation cache
+    # then serves it; the episode budget is not part of the program)
+    run(make_keydoor(), TrainConfig(**(CFG | {"max_episodes_per_level": 200})), [0, 1], out,
+        progress=False)
     other = TrainConfig(**(CFG | {"max_episodes_per_level": 200, "gamma": 0.95, "num_envs": 8}))
     with pytest.raises(ConfigError, match=r"differs in .*gamma.*num_envs"):
-        run(make_keydoor(), other, [0], out, progress=False, resume=True)
+        run(make_keydoor(), other, [0, 1], out, progress=False, resume=True)
     with pytest.raises(ConfigError, match="seeds"):
-        run(make_keydoor(), TrainConfig(**(CFG | {"max_episodes_per_level": 200})), [0, 1], out,
+        run(make_keydoor(), TrainConfig(**(CFG | {"max_episodes_per_level": 200})), [0], out,
             progress=False, resume=True)
     with pytest.raises(FileExistsError, match="already holds"):
         run(make_keydoor(), TrainConfig(**CFG), [0], out, progress=False)
