@@ -1,5 +1,6 @@
 """Checkpoint and resume: a run killed with SIGKILL mid-level and resumed gives the same
-results as an uninterrupted run; a different config is refused, naming the fields."""
+results as an uninterrupted run, and so does one lost right after a level-boundary
+checkpoint; a different config is refused, naming the fields."""
 import json
 import os
 import signal
@@ -12,6 +13,8 @@ import pytest
 
 from hier_env import make_keydoor
 from smjax.train import ConfigError, TrainConfig
+from smjax.train import checkpoint as ckpt
+from smjax.train.loop import HierarchyTrainer
 from smjax.train.run import run
 
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
@@ -74,3 +77,33 @@ def test_resume_with_different_config_is_refused(tmp_path):
         run(make_keydoor(), TrainConfig(**CFG), [0], out, progress=False)
     with pytest.raises(FileNotFoundError, match="nothing to resume"):
         run(make_keydoor(), TrainConfig(**CFG), [0], tmp_path / "empty", progress=False, resume=True)
+
+
+class _MachineLost(Exception):
+    pass
+
+
+def test_a_level_boundary_checkpoint_holds_the_next_level_and_resumes_exactly(tmp_path, monkeypatch):
+    # checkpoints only at level boundaries (what a run that moves between machines uses)
+    cfg = TrainConfig(**(CFG | {"max_episodes_per_level": 300, "checkpoint_every": 1e9}))
+    straight = run(make_keydoor(), cfg, [0, 1], tmp_path / "straight", progress=False)
+    assert len(straight["levels"]) >= 2
+    save = HierarchyTrainer.save
+
+    def save_then_lose_the_machine(trainer):
+        save(trainer)
+        if trainer.host["plan_index"] == 1:
+            raise _MachineLost
+
+    monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
+    out = tmp_path / "moved"
+    with pytest.raises(_MachineLost):
+        run(make_keydoor(), cfg, [0, 1], out, progress=False)
+    monkeypatch.undo()
+    host = ckpt.load_meta(out)["meta"]["host"]
+    # the checkpoint is the start of level 2: its learner is fresh, level 1 is in the bank
+    assert host["plan_index"] == 1 and host["in_level"]
+    assert host["episodes"] == [0, 0] and host["env_steps"] == [0, 0]
+    assert host["levels"] == straight["levels"][:1]
+    resumed = run(make_keydoor(), cfg, [0, 1], out, progress=False, resume=True)
+    assert _strip_timing(resumed) == _strip_timing(straight)
