@@ -160,6 +160,8 @@ def test_vmapped_batch_of_512_equals_unbatched_runs():
     for t in range(T):
         obs, states, reward, term, trunc, info = vstep(step_keys[t], states, actions[t], params)
         batched.append((obs, states, reward, term, trunc, info["final_observation"]))
+    # on the host once: indexing device arrays row by row below would dispatch 2048 x 20 slices
+    batched = jax.tree.map(np.asarray, batched)
     reset1, step1 = jax.jit(env.reset), jax.jit(env.step)
     for i in range(B):
         obs, state = reset1(reset_keys[i], params)

@@ -129,7 +129,15 @@ def test_determinism_and_vmap_matches_single(fetch2):
         return jnp.concatenate([obs0[None], obs])
 
     batched = jax.jit(jax.vmap(rollout))(keys, actions)
-    single = jax.jit(rollout)
+
+    def single(key, acts):  # one environment, step by step (the fixture's compiled functions)
+        obs0, s = reset(key, params)
+        obs = [obs0]
+        for a in acts:
+            o, s, *_ = step(key, s, a, params)
+            obs.append(o)
+        return jnp.stack(obs)
+
     first = single(keys[0], actions[0])
     again = single(keys[0], actions[0])
     np.testing.assert_array_equal(np.asarray(first), np.asarray(again))

@@ -59,24 +59,21 @@ def test_sigkill_then_resume_equals_uninterrupted(tmp_path):
     assert _strip_timing(resumed) == _strip_timing(straight)
     on_disk = json.loads((out / "results.json").read_text())
     assert on_disk["levels"] == straight["levels"]
+    # the refusals are checked on this finished run (a run of their own would train again)
+    _resume_with_different_config_is_refused(out, tmp_path / "empty")
 
 
-def test_resume_with_different_config_is_refused(tmp_path):
-    out = tmp_path / "run"
-    # seeds [0, 1]: the compiled program of the test above (the suite's compilation cache
-    # then serves it; the episode budget is not part of the program)
-    run(make_keydoor(), TrainConfig(**(CFG | {"max_episodes_per_level": 200})), [0, 1], out,
-        progress=False)
-    other = TrainConfig(**(CFG | {"max_episodes_per_level": 200, "gamma": 0.95, "num_envs": 8}))
+def _resume_with_different_config_is_refused(out, empty):
+    """``out`` holds a checkpointed run of ``CFG`` with seeds [0, 1]."""
+    other = TrainConfig(**(CFG | {"gamma": 0.95, "num_envs": 8}))
     with pytest.raises(ConfigError, match=r"differs in .*gamma.*num_envs"):
         run(make_keydoor(), other, [0, 1], out, progress=False, resume=True)
     with pytest.raises(ConfigError, match="seeds"):
-        run(make_keydoor(), TrainConfig(**(CFG | {"max_episodes_per_level": 200})), [0], out,
-            progress=False, resume=True)
+        run(make_keydoor(), TrainConfig(**CFG), [0], out, progress=False, resume=True)
     with pytest.raises(FileExistsError, match="already holds"):
         run(make_keydoor(), TrainConfig(**CFG), [0], out, progress=False)
     with pytest.raises(FileNotFoundError, match="nothing to resume"):
-        run(make_keydoor(), TrainConfig(**CFG), [0], tmp_path / "empty", progress=False, resume=True)
+        run(make_keydoor(), TrainConfig(**CFG), [0], empty, progress=False, resume=True)
 
 
 class _MachineLost(Exception):

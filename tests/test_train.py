@@ -16,7 +16,8 @@ SMALL = dict(num_envs=32, rollout_ticks=16, updates_per_chunk=4, max_episodes_pe
 @pytest.fixture(scope="module")
 def top_down_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("td")
-    res = run(make_keydoor(), TrainConfig(**SMALL), [0, 1], out, progress=False)
+    # with TensorBoard files (host-side logging; the compiled program is the same)
+    res = run(make_keydoor(), TrainConfig(**SMALL, tensorboard=True), [0, 1], out, progress=False)
     return res, out
 
 
@@ -70,6 +71,8 @@ def test_results_contract(top_down_run):
     header = (out / "curves.csv").read_text().splitlines()[0]
     assert tuple(header.split(",")) == CURVE_COLUMNS
     assert (out / "curves.png").stat().st_size > 5000
+    events = list((out / "tensorboard").glob("events.out.tfevents.*"))  # written on request
+    assert events and events[0].stat().st_size > 100
     # episodes to threshold are the per-level episodes summed, as the paper counts
     for s in range(2):
         assert on_disk["episodes_to_threshold"][s] == sum(l["episodes"][s] for l in on_disk["levels"])
