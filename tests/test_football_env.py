@@ -62,7 +62,7 @@ def _rollout(env, params, key, ticks, actions):
     def body(carry, k):
         obs, s = carry
         obs, s, r, te, tr, info = env.step(k, s, actions, params)
-        return (obs, s), (obs, r, info["score"])
+        return (obs, s), (obs, r, info["score"], s)
     obs, s = env.reset(key, params)
     return jax.lax.scan(body, (obs, s), jax.random.split(key, ticks))
 
@@ -77,17 +77,36 @@ def test_same_key_same_match():
     assert not np.array_equal(np.asarray(a[0][1].pos), np.asarray(c[0][1].pos))
 
 
+def _assert_same_play(got, want):
+    for x, y in zip(jax.tree.leaves(got), jax.tree.leaves(want)):
+        x, y = np.asarray(x), np.asarray(y)
+        if np.issubdtype(y.dtype, np.floating):
+            np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-6)
+        else:  # who owns the ball, scores, cooldowns, facings: the play itself
+            np.testing.assert_array_equal(x, y)
+
+
 def test_vmapped_batch_equals_unbatched():
+    # Checked one tick at a time, from many different states: vmap changes XLA's fusion and
+    # so float32 rounding (~1e-9), and football is chaotic, so over a long rollout such a
+    # difference can grow until a tackle or pass goes the other way (seen with XLA's
+    # optimizations off). What must hold is that a batched tick is the unbatched tick.
     env, params = smjax.make("football/11v11_hard", observation="paper")
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
     acts = jax.random.randint(jax.random.PRNGKey(1), (3, 11), 0, 20)
-    roll = lambda k, a: _rollout(env, params, k, 60, a)
-    batched = jax.jit(jax.vmap(roll))(keys, acts)
-    single_roll = jax.jit(roll)
-    for i in range(3):
-        single = single_roll(keys[i], acts[i])
-        for x, y in zip(jax.tree.leaves(batched), jax.tree.leaves(single)):
-            np.testing.assert_allclose(np.asarray(x)[i], np.asarray(y), atol=1e-6)
+    _, (_, _, _, states) = jax.jit(jax.vmap(lambda k, a: _rollout(env, params, k, 60, a)))(keys, acts)
+    # 3 matches x 6 moments (kick-off to tick 50), each with its own key and actions
+    starts = jax.tree.map(lambda x: x[:, ::10].reshape((18,) + x.shape[2:]), states)
+    tick_keys = jax.random.split(jax.random.PRNGKey(2), 18)
+    tick_acts = jax.random.randint(jax.random.PRNGKey(3), (18, 11), 0, 20)
+    step = lambda k, s, a: env.step(k, s, a, params)
+    batched = jax.jit(jax.vmap(step))(tick_keys, starts, tick_acts)
+    single = jax.jit(step)
+    for i in range(18):
+        _assert_same_play(jax.tree.map(lambda x: x[i], batched),
+                          single(tick_keys[i], jax.tree.map(lambda x: x[i], starts), tick_acts[i]))
+    owners = np.asarray(starts.owner)
+    assert len(np.unique(owners)) > 2  # the moments really differ: several players had the ball
 
 
 def test_registry_spaces_and_overrides():
