@@ -14,7 +14,9 @@ compile time measured separately, steps/s = num_envs * steps / run time, median 
 ``--repeats``). Then it plays ``--episodes`` full episodes (50 N steps) of the scripted
 hierarchy (``--levels 2``: stack -> place_i -> reach/pick/release, the paper's hierarchy;
 ``--levels 1``: stack -> place_i controllers) and prints the success rate: the fraction
-of episodes whose final state has every block within 0.04 m of its goal.
+of episodes whose final state has every block within 0.04 m of its goal. ``--epsilon 0 0.05``
+repeats the episodes with a root that explores (a random block's ``place_i`` with that
+probability at each level-1 choice).
 """
 from __future__ import annotations
 
@@ -68,9 +70,10 @@ def throughput(env, params, num_envs: int, steps: int, repeats: int, seed: int,
             "compile_seconds": compile_s, "device": jax.devices()[0].platform}
 
 
-def scripted_success(env, params, episodes: int, levels: int, seed: int, chunk: int) -> dict:
+def scripted_success(env, params, episodes: int, levels: int, seed: int, chunk: int,
+                     epsilon: float = 0.0) -> dict:
     horizon = int(params.max_steps)
-    fn = jax.jit(jax.vmap(lambda k: rollout(env, k, params, horizon, levels)))
+    fn = jax.jit(jax.vmap(lambda k: rollout(env, k, params, horizon, levels, epsilon)))
     keys = jax.random.split(jax.random.PRNGKey(seed), episodes)
     successes, scores = [], []
     t0 = time.perf_counter()
@@ -85,7 +88,8 @@ def scripted_success(env, params, episodes: int, levels: int, seed: int, chunk: 
     seconds = time.perf_counter() - t0
     success, score = np.concatenate(successes), np.concatenate(scores)
     first = [int(np.argmax(s)) for s in success if s.any()]
-    return {"env": env.name, "levels": levels, "episodes": episodes, "horizon": horizon,
+    return {"env": env.name, "levels": levels, "epsilon": epsilon, "episodes": episodes,
+            "horizon": horizon,
             "success_rate": float(success[:, -1].mean()),
             "ever_success_rate": float(success.any(axis=1).mean()),
             "final_score": float(score[:, -1].mean()),
@@ -105,6 +109,9 @@ def main(argv=None) -> None:
                     help="actions for the throughput runs")
     ap.add_argument("--episodes", type=int, default=64, help="scripted episodes (0: skip)")
     ap.add_argument("--levels", type=int, choices=(1, 2), default=2)
+    ap.add_argument("--epsilon", type=float, nargs="+", default=[0.0],
+                    help="level-1 exploration rate(s) of the success episodes: the score an "
+                         "optimal root reaches while exploring like DQN (its end epsilon: 0.05)")
     ap.add_argument("--substeps", type=int, default=None)
     ap.add_argument("--timestep", type=float, default=None)
     ap.add_argument("--seed", type=int, default=0)
@@ -119,9 +126,9 @@ def main(argv=None) -> None:
         if args.steps > 0:
             print(json.dumps(throughput(env, params, n, args.steps, args.repeats, args.seed,
                                         args.policy)), flush=True)
-    if args.episodes > 0:
+    for epsilon in args.epsilon if args.episodes > 0 else []:
         print(json.dumps(scripted_success(env, params, args.episodes, args.levels, args.seed,
-                                          min(args.chunk, args.episodes))), flush=True)
+                                          min(args.chunk, args.episodes), epsilon)), flush=True)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,9 @@
 """Suite-wide test settings. On the CPU most of this suite's time is XLA compiling programs
 (a training run's chunk, gate and evaluation programs take ~10-30 s to compile and often
-less to run), so both settings below cut compile time; neither changes a test.
+less to run), so both settings below cut compile time. Neither changes a program's HLO, but the second
+changes its machine code and so float32 rounding: tests that compare two different programs
+(vmapped vs unbatched, sharded vs not) compare floats with a tolerance, one step at a time
+where the dynamics are chaotic (football), never bit for bit.
 
 1. One JAX persistent compilation cache per test session. Many tests compile the very same
    XLA programs (the same training config run twice to compare numbers, a run that is

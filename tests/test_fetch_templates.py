@@ -129,3 +129,24 @@ def test_paper_hold_hierarchy_idles_only_once_the_tower_stands():
     assert not bool(hold.initiation(state.replace(data=state.data.replace(qpos=one_off)), params))
     np.testing.assert_array_equal(
         np.asarray(hold.controller(jax.random.PRNGKey(0), placed, params)), np.zeros(4))
+
+
+def test_scripted_root_explores_only_among_blocks_not_in_place():
+    from smjax.envs.fetch.scripted import init_script_state, scripted_action
+
+    env, params = smjax.make("fetch/stack3")
+    _, state = jax.jit(env.reset_env)(jax.random.PRNGKey(1), params)
+    qpos = state.data.qpos.at[9:12].set(state.goals[0])       # block 0 on its goal
+    state = state.replace(data=state.data.replace(qpos=qpos))
+
+    @jax.jit
+    def first_choice(keys, epsilon):
+        return jax.vmap(lambda k: scripted_action(state, params, init_script_state(), 2, k,
+                                                  epsilon)[1].block)(keys)
+
+    keys = jax.random.split(jax.random.PRNGKey(2), 64)
+    np.testing.assert_array_equal(np.asarray(first_choice(keys, 0.0)), 1)  # the lowest unplaced
+    explored = np.asarray(first_choice(keys, 1.0))
+    assert set(explored.tolist()) == {1, 2}                   # never block 0, which is in place
+    with pytest.raises(ValueError, match="epsilon"):
+        scripted_action(state, params, init_script_state(), 2, keys[0], 1.5)

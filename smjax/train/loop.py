@@ -387,18 +387,25 @@ class HierarchyTrainer:
             return None
         from tqdm.auto import tqdm
 
-        self._bar_total = self.cfg.for_level(plan.name).max_episodes_per_level
+        cfg = self.cfg.for_level(plan.name)
+        # a level with an env-step budget counts steps (its episode budget is then usually
+        # a formality, e.g. 10**9); otherwise it counts episodes
+        self._bar_counts = "env_steps" if cfg.max_steps_per_level else "episodes"
+        self._bar_total = cfg.max_steps_per_level or cfg.max_episodes_per_level
         return tqdm(total=self._bar_total, desc=f"level {plan.level} {plan.name}",
-                    unit="ep", leave=True, initial=int(np.mean(self.host["episodes"])))
+                    unit="step" if cfg.max_steps_per_level else "ep", unit_scale=True,
+                    leave=True, initial=int(np.mean(self.host[self._bar_counts])))
 
     def _draw(self, bar, dt: float, steps_per_update: int) -> None:
         host = self.host
-        bar.n = int(min(np.mean(host["episodes"]), self._bar_total))
+        bar.n = int(min(np.mean(host[self._bar_counts]), self._bar_total))
         rate = self.cfg.updates_per_chunk * steps_per_update * len(self.seeds) / max(dt, 1e-9)
         runs = [r for r in host["running"] if r is not None]
         gates = [g for g in host["gate_success"] if g is not None]
         extra = {"gate": f"{np.mean(gates):.2f}"} if gates else {}
         bar.set_postfix(success=f"{np.mean(runs) if runs else 0:.2f}", **extra,
                         done=f"{len(self.seeds) - sum(host['active'])}/{len(self.seeds)}",
+                        **({"episodes": f"{np.mean(host['episodes']):,.0f}"}
+                           if self._bar_counts == "env_steps" else {}),
                         steps_s=f"{rate:,.0f}")
         bar.refresh()

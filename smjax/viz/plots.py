@@ -61,7 +61,15 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
         ax.set_xlabel("episodes")
         ax.set_ylabel("average reward")
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=8)
+        if not ax.lines:
+            ax.text(0.5, 0.5, "no complete success window yet", ha="center", va="center",
+                    transform=ax.transAxes, fontsize=8, color="gray")
+    # a legend on the first panel that has curves (a level can have none, e.g. a run cut
+    # before its first full success window)
+    for ax in axes[0]:
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+            break
     if title:
         fig.suptitle(title)
     fig.tight_layout()

@@ -39,10 +39,19 @@ def _per_block(fn, state, params, n: int) -> jax.Array:
     return jnp.stack([fn(state, params, i) for i in range(n)])
 
 
-def scripted_action(state, params, script: ScriptState, levels: int = 2):
-    """One tick of the scripted hierarchy: (action float32[4], next ScriptState)."""
+def scripted_action(state, params, script: ScriptState, levels: int = 2,
+                    key: jax.Array | None = None, epsilon: float = 0.0):
+    """One tick of the scripted hierarchy: (action float32[4], next ScriptState).
+
+    With ``key`` and ``epsilon`` > 0 the level-1 choice explores like a DQN root: with
+    probability ``epsilon`` it calls ``place_i`` for a uniformly drawn block not in place
+    (the initiable ones) instead of the lowest one. This measures the score an optimal but
+    exploring root can reach (the ceiling of a learner's running score).
+    """
     if levels not in (1, 2):
         raise ValueError(f"levels must be 1 or 2, got {levels!r}")
+    if isinstance(epsilon, (int, float)) and not 0.0 <= epsilon <= 1.0:  # (may be traced)
+        raise ValueError(f"epsilon must be in [0, 1], got {epsilon!r}")
     n = state.goals.shape[-2]
     placed = blocks_placed(state, params)
     place_done = _per_block(tp.place_satisfied, state, params, n)
@@ -50,6 +59,11 @@ def scripted_action(state, params, script: ScriptState, levels: int = 2):
     safe_block = jnp.maximum(block, 0)
     top_done = (block < 0) | place_done[safe_block] | (script.place_steps >= tp.K_MAX["place"])
     first_unplaced = jnp.argmax(~placed)
+    if key is not None:
+        key_explore, key_block = jax.random.split(key)
+        random_unplaced = jax.random.categorical(key_block, jnp.where(placed, -jnp.inf, 0.0))
+        explore = jax.random.uniform(key_explore) < epsilon
+        first_unplaced = jnp.where(explore, random_unplaced, first_unplaced)
     new_block = jnp.where(jnp.any(~placed), first_unplaced, -1).astype(jnp.int32)
     block = jnp.where(top_done, new_block, block)
     place_steps = jnp.where(top_done, 0, script.place_steps)
@@ -84,17 +98,19 @@ def scripted_action(state, params, script: ScriptState, levels: int = 2):
     return action, next_script
 
 
-def rollout(env, key: jax.Array, params, num_steps: int, levels: int = 2):
+def rollout(env, key: jax.Array, params, num_steps: int, levels: int = 2, epsilon: float = 0.0):
     """Reset, then play the scripted hierarchy for ``num_steps`` (no auto-reset).
 
     Returns (final env state, per-step rewards float32[T], per-step info dict of [T] arrays).
-    Jit and vmap it (``num_steps`` and ``levels`` static).
+    Jit and vmap it (``num_steps`` and ``levels`` static; ``epsilon``: the level-1
+    exploration of ``scripted_action``, 0 for none).
     """
     _, state = env.reset_env(key, params)
 
     def tick(carry, step_key):
         env_state, script = carry
-        action, script = scripted_action(env_state, params, script, levels)
+        action, script = scripted_action(env_state, params, script, levels,
+                                         jax.random.fold_in(step_key, 1), epsilon)
         _, env_state, reward, _, _, info = env.step_env(step_key, env_state, action, params)
         return (env_state, script), (reward, info["is_success"], info["score"])
 
