@@ -1,7 +1,13 @@
 # Fetch sample complexity on one GPU (benchmarks/RESULTS.md section 7): the (blocks, method)
 # runs of fetch_sample_complexity.py, one after another (one run alone trains ~11k env
 # steps/s on an H100; two sharing the GPU get ~4k each). JOBS picks runs (default
-# "fl3 td3 fl4 td4"), EXTRA adds flags. Needs the mujoco/mjx/brax wheels in .whl (device README).
+# "fl3 td3 fl4 td4"), EXTRA adds flags. Needs the mujoco/mjx/brax wheels in .whl (device README),
+# carried with the call (carry [".whl"]); download them (py 3.12, ~34 MB) with
+#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+#     --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 --platform manylinux_2_17_x86_64 \
+#     --platform manylinux2014_x86_64 --platform manylinux1_x86_64 -d .whl mujoco==4.0.0 mujoco-core==4.0.0 \
+#     mujoco-studio==4.0.0 mujoco-mjx==3.17.0 brax==0.14.2 glfw pyopengl trimesh tensorboardx jaxopt \
+#     ml-collections websockets flask flask-cors itsdangerous blinker
 #
 # A device call lasts at most 10 minutes but a machine stays up to 30: the first call
 # (MODE=start) detaches the queue with setsid so it runs on between calls; later calls
