@@ -16,6 +16,7 @@ import pytest
 
 import smjax
 from smjax.options import Hierarchy
+from test_fetch_physics import _pose
 
 SCHEDULE = ("reach_0", "pick_0", "release_0", "place_1")
 
@@ -119,14 +120,10 @@ def test_paper_hold_hierarchy_idles_only_once_the_tower_stands():
     assert not bool(hold.initiation(state, params))          # reset: nothing placed
     assert not bool(hold.satisfied(state, params))
     # Put every block on its goal: now (and only now) the root may do nothing.
-    qpos = state.data.qpos
-    for i in range(env.num_blocks):
-        start = 9 + 7 * i
-        qpos = qpos.at[start:start + 3].set(state.goals[i])
-    placed = state.replace(data=state.data.replace(qpos=qpos))
+    placed = _pose(state, blocks=state.goals)
     assert bool(hold.initiation(placed, params))
-    one_off = qpos.at[9:12].add(jnp.asarray([0.06, 0.0, 0.0]))     # block 0 6 cm off its goal
-    assert not bool(hold.initiation(state.replace(data=state.data.replace(qpos=one_off)), params))
+    one_off = state.goals.at[0].add(jnp.asarray([0.06, 0.0, 0.0]))  # block 0 6 cm off its goal
+    assert not bool(hold.initiation(_pose(state, blocks=one_off), params))
     np.testing.assert_array_equal(
         np.asarray(hold.controller(jax.random.PRNGKey(0), placed, params)), np.zeros(4))
 
@@ -136,8 +133,7 @@ def test_scripted_root_explores_only_among_blocks_not_in_place():
 
     env, params = smjax.make("fetch/stack3")
     _, state = jax.jit(env.reset_env)(jax.random.PRNGKey(1), params)
-    qpos = state.data.qpos.at[9:12].set(state.goals[0])       # block 0 on its goal
-    state = state.replace(data=state.data.replace(qpos=qpos))
+    state = _pose(state, blocks=state.goals[:1])              # block 0 on its goal
 
     @jax.jit
     def first_choice(keys, epsilon):

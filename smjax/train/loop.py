@@ -393,8 +393,9 @@ class HierarchyTrainer:
         self._bar_counts = "env_steps" if cfg.max_steps_per_level else "episodes"
         self._bar_total = cfg.max_steps_per_level or cfg.max_episodes_per_level
         return tqdm(total=self._bar_total, desc=f"level {plan.level} {plan.name}",
-                    unit="step" if cfg.max_steps_per_level else "ep", unit_scale=True,
-                    leave=True, initial=int(np.mean(self.host[self._bar_counts])))
+                    unit={"env_steps": "step", "episodes": "ep"}[self._bar_counts],
+                    unit_scale=True, leave=True,
+                    initial=int(np.mean(self.host[self._bar_counts])))
 
     def _draw(self, bar, dt: float, steps_per_update: int) -> None:
         host = self.host
@@ -403,9 +404,9 @@ class HierarchyTrainer:
         runs = [r for r in host["running"] if r is not None]
         gates = [g for g in host["gate_success"] if g is not None]
         extra = {"gate": f"{np.mean(gates):.2f}"} if gates else {}
+        extra["done"] = f"{len(self.seeds) - sum(host['active'])}/{len(self.seeds)}"
+        if self._bar_counts == "env_steps":  # the bar counts steps: show episodes beside it
+            extra["episodes"] = f"{np.mean(host['episodes']):,.0f}"
         bar.set_postfix(success=f"{np.mean(runs) if runs else 0:.2f}", **extra,
-                        done=f"{len(self.seeds) - sum(host['active'])}/{len(self.seeds)}",
-                        **({"episodes": f"{np.mean(host['episodes']):,.0f}"}
-                           if self._bar_counts == "env_steps" else {}),
                         steps_s=f"{rate:,.0f}")
         bar.refresh()

@@ -50,8 +50,12 @@ def scripted_action(state, params, script: ScriptState, levels: int = 2,
     """
     if levels not in (1, 2):
         raise ValueError(f"levels must be 1 or 2, got {levels!r}")
-    if isinstance(epsilon, (int, float)) and not 0.0 <= epsilon <= 1.0:  # (may be traced)
+    fixed = isinstance(epsilon, (int, float))  # else traced
+    if fixed and not 0.0 <= epsilon <= 1.0:
         raise ValueError(f"epsilon must be in [0, 1], got {epsilon!r}")
+    # a fixed 0 draws nothing: the plain scripted hierarchy (also the throughput benchmark's
+    # policy) keeps its workload
+    explores = key is not None and not (fixed and epsilon == 0.0)
     n = state.goals.shape[-2]
     placed = blocks_placed(state, params)
     place_done = _per_block(tp.place_satisfied, state, params, n)
@@ -59,7 +63,7 @@ def scripted_action(state, params, script: ScriptState, levels: int = 2,
     safe_block = jnp.maximum(block, 0)
     top_done = (block < 0) | place_done[safe_block] | (script.place_steps >= tp.K_MAX["place"])
     first_unplaced = jnp.argmax(~placed)
-    if key is not None:
+    if explores:
         key_explore, key_block = jax.random.split(key)
         random_unplaced = jax.random.categorical(key_block, jnp.where(placed, -jnp.inf, 0.0))
         explore = jax.random.uniform(key_explore) < epsilon
