@@ -293,6 +293,10 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    if args.command in ("train", "render"):  # bench reports compile time: it compiles afresh
+        from smjax.core.compile_cache import enable_compilation_cache
+
+        enable_compilation_cache()
     return {"train": _cmd_train, "bench": _cmd_bench, "list": _cmd_list, "plot": _cmd_plot,
             "render": _cmd_render}[args.command](args)
 

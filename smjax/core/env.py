@@ -37,6 +37,10 @@ class Environment(Generic[TEnvState, TEnvParams]):
 
     #: ``ENV/TASK`` name this instance was made for (set by the registry).
     name: str = "unnamed"
+    #: The task's per-episode success (``info["success"]``, else the episode return) always
+    #: lies in [0, 1]. Lets the trainer stop a level's gate as soon as its outcome is
+    #: certain; leave False where returns can leave [0, 1] (e.g. goal differences).
+    success_in_unit_interval: bool = False
 
     # ---- to implement -------------------------------------------------
     @property

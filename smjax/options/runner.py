@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from smjax.agents.base import Transition
+from smjax.agents.base import ActOutput, Transition
 from smjax.agents.smdp import no_pending
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
@@ -48,6 +48,24 @@ class EnvCarry:
     learner_started: jax.Array  # bool: the learner has acted in this episode
     learner_return: jax.Array   # float: learner reward collected in this episode
     pending: Transition         # the learner's decision still running at the last rollout end
+    pool: "ResetPool | None" = None  # pre-generated episode starts (None: reset in every tick)
+
+
+@struct.dataclass
+class ResetPool:
+    """Episode starts generated ahead of time (leading axis P), handed out in order.
+
+    Generating a fresh episode start for every environment in every tick (and throwing
+    it away wherever the episode goes on) costs as much as the step itself in worlds
+    with procedural generation; instead ``refill`` generates P starts once (the engine
+    does it before every rollout) and each reset takes the next unused one, so within
+    a rollout every episode gets its own fresh start unless more than P episodes end
+    (then starts are reused, oldest first).
+    """
+
+    obs: jax.Array
+    state: Any
+    next: jax.Array  # int32: index of the next start to hand out (mod P)
 
 
 @struct.dataclass
@@ -90,11 +108,14 @@ class Controls:
     start: option placed at the bottom of the stack at each reset (0 = root; a template
       id starts that template directly from reset states, as bottom-up training does).
     learned: bool [num_options], options whose frozen policy is in the bank.
+    teleport: bool, unlearned templates may be teleported (None: as the runner was built;
+      False turns a teleporting runner into an evaluating one without another compile).
     """
 
     learner: jax.Array
     start: jax.Array
     learned: jax.Array
+    teleport: jax.Array | None = None
 
 
 class HierarchyRunner:
@@ -103,7 +124,7 @@ class HierarchyRunner:
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, gamma: float,
                  frozen_policy: str = "greedy", allow_teleport: bool = True,
                  reset_on_learner_end: bool = True, frozen_temperature: float = 1.0,
-                 learner_acts_frozen: bool = False):
+                 learner_acts_frozen: bool = False, reset_pool: int = 0):
         if frozen_policy not in ("greedy", "sample"):
             raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {frozen_policy!r}")
         self.env, self.env_params, self.h, self.agent = env, env_params, hierarchy, agent
@@ -117,6 +138,9 @@ class HierarchyRunner:
         # The learner picks as the bank will run it once frozen (greedy or sampled, per
         # ``frozen_policy``) instead of exploring: the engine's level acceptance gate.
         self.learner_acts_frozen = bool(learner_acts_frozen)
+        if isinstance(reset_pool, bool) or not isinstance(reset_pool, int) or reset_pool < 0:
+            raise ValueError(f"reset_pool must be an integer >= 0, got {reset_pool!r}")
+        self.reset_pool = reset_pool
         tpls = hierarchy.template_list
         self.templates = tpls
         self.P = hierarchy.num_primitives
@@ -147,12 +171,17 @@ class HierarchyRunner:
         vals = [jnp.asarray(True)] + [t.initiation(state, self.env_params) for t in self.templates]
         return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
 
-    def callable_options(self, learned: jax.Array, learner: jax.Array) -> jax.Array:
+    def teleports_on(self, controls: Controls) -> jax.Array:
+        """bool: unlearned templates with a teleport jump (else they are not callable)."""
+        allowed = jnp.asarray(self.allow_teleport)
+        return allowed if controls.teleport is None else allowed & controls.teleport
+
+    def callable_options(self, learned: jax.Array, learner: jax.Array,
+                         teleport: jax.Array | bool | None = None) -> jax.Array:
         """bool [num_options]: options that can run now (learned, the learner, or realisable)."""
         ids = jnp.arange(self.h.num_options)
-        realise = jnp.asarray(self.has_controller)
-        if self.allow_teleport:
-            realise = realise | jnp.asarray(self.has_teleport)
+        teleport = self.allow_teleport if teleport is None else teleport
+        realise = jnp.asarray(self.has_controller) | (jnp.asarray(self.has_teleport) & teleport)
         return learned | realise | (ids == learner)
 
     def action_masks(self, init_ok: jax.Array, callable_: jax.Array) -> jax.Array:
@@ -163,12 +192,39 @@ class HierarchyRunner:
 
     # ---- resets -------------------------------------------------------------
     def reset(self, key: jax.Array, controls: Controls, num_envs: int) -> EnvCarry:
-        keys = jax.random.split(key, num_envs)
-        obs, state = jax.vmap(self.env.reset_env, (0, None))(keys, self.env_params)
+        # without a pool the key is used as it always was, so such runs keep their numbers
+        k_envs, k_pool = jax.random.split(key) if self.reset_pool else (key, None)
+        obs, state = self._fresh_starts(k_envs, num_envs)
         stack = jax.vmap(lambda _: stack_init(self.D, controls.start))(jnp.arange(num_envs))
         zeros_b = jnp.zeros((num_envs,), bool)
+        pool = self._new_pool(k_pool) if self.reset_pool else None
         return EnvCarry(state, obs, stack, zeros_b, jnp.zeros((num_envs,), jnp.float32),
-                        no_pending(obs, self.h.num_actions))
+                        no_pending(obs, self.h.num_actions), pool)
+
+    def _fresh_starts(self, key: jax.Array, n: int):
+        return jax.vmap(self.env.reset_env, (0, None))(jax.random.split(key, n), self.env_params)
+
+    def _new_pool(self, key: jax.Array) -> ResetPool:
+        obs, state = self._fresh_starts(key, self.reset_pool)
+        return ResetPool(obs, state, jnp.zeros((), jnp.int32))
+
+    def refill(self, carry: EnvCarry, key: jax.Array) -> EnvCarry:
+        """New episode starts in the pool (no-op without one)."""
+        if carry.pool is None:
+            return carry
+        return carry.replace(pool=self._new_pool(key))
+
+    def _next_starts(self, carry: EnvCarry, reset: jax.Array, key: jax.Array):
+        """(obs, state) of a new episode for every environment (used where ``reset``), and
+        the pool after handing them out."""
+        if carry.pool is None:
+            obs, state = self._fresh_starts(key, reset.shape[0])
+            return obs, state, None
+        pool = carry.pool
+        slot = (pool.next + jnp.cumsum(reset) - 1) % self.reset_pool
+        take = lambda x: x[slot]  # noqa: E731
+        obs, state = take(pool.obs), jax.tree.map(take, pool.state)
+        return obs, state, pool.replace(next=(pool.next + reset.sum()) % self.reset_pool)
 
     # ---- the decision cascade (unbatched) -------------------------------------
     def _decide(self, stack, frozen_choice, learner_choice, controls: Controls, callable_):
@@ -180,9 +236,10 @@ class HierarchyRunner:
         scripted = jnp.asarray(NO_OPTION, jnp.int32)
         # A called template is pushed if it is learned, is the learner, or plays a scripted
         # controller (when it is not teleported instead); otherwise it is teleported.
-        scripted_ok = self.has_controller & ~(self.has_teleport & self.allow_teleport)
+        scripted_ok = jnp.asarray(self.has_controller) & ~(
+            jnp.asarray(self.has_teleport) & self.teleports_on(controls))
         pushable = (controls.learned | (jnp.arange(self.h.num_options) == controls.learner)
-                    | jnp.asarray(scripted_ok))
+                    | scripted_ok)
         for _ in range(self.D):
             top = jnp.maximum(stack_top(stack), 0)
             is_learner = top == controls.learner
@@ -209,17 +266,17 @@ class HierarchyRunner:
              controls: Controls) -> tuple[EnvCarry, Transition, EpisodeEnds]:
         B = carry.obs.shape[0]
         k_act, k_frozen, k_ctrl, k_tp, k_step, k_reset = jax.random.split(key, 6)
-        callable_ = self.callable_options(controls.learned, controls.learner)
+        teleport_on = self.teleports_on(controls)
+        callable_ = self.callable_options(controls.learned, controls.learner, teleport_on)
         init_ok = jax.vmap(self._initiation)(carry.env_state)                     # [B, O]
         masks = jax.vmap(lambda i: self.action_masks(i, callable_))(init_ok)      # [B, O, A]
         learner_idx = jnp.maximum(controls.learner, 0)
         learner_mask = masks[:, learner_idx]                                      # [B, A]
-        act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
         if self.learner_acts_frozen:
-            own = self.agent.policy_logits(learner_state.params, carry.obs)       # [B, A]
-            act = act._replace(action=self._frozen_pick(
-                jnp.where(learner_mask, own, -1e9), k_act).astype(act.action.dtype))
-        logits = jax.vmap(self.agent.policy_logits, (0, None))(bank_params, carry.obs)  # [O, B, A]
+            act = self._act_frozen(learner_state, carry.obs, learner_mask, k_act, controls)
+        else:
+            act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
+        logits = self.frozen_logits(bank_params, carry.obs, controls)             # [O, B, A]
         logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
         frozen = self._frozen_pick(logits, k_frozen)
         frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)                     # [B, O]
@@ -237,6 +294,7 @@ class HierarchyRunner:
 
         state_in = carry.env_state
         if self.allow_teleport and self.teleport_families:
+            teleported = jnp.where(teleport_on, teleported, NO_OPTION)
             state_in, action = self._run_family(self.teleport_families, k_tp, state_in, teleported,
                                                 action, controls=False)
 
@@ -278,8 +336,7 @@ class HierarchyRunner:
         learner_done = reset | learner_ended
         finished = learner_done & started
 
-        obs_re, state_re = jax.vmap(self.env.reset_env, (0, None))(
-            jax.random.split(k_reset, B), self.env_params)
+        obs_re, state_re, pool = self._next_starts(carry, reset, k_reset)
         fresh = jax.vmap(lambda _: stack_init(self.D, controls.start))(jnp.arange(B))
         new_carry = EnvCarry(
             env_state=jax.vmap(select_tree)(reset, state_re, state),
@@ -288,6 +345,7 @@ class HierarchyRunner:
             learner_started=started & ~learner_done,
             learner_return=jnp.where(learner_done, 0.0, ep_return),
             pending=carry.pending,  # the engine updates it once per rollout (carry_pending)
+            pool=pool,
         )
         transition = Transition(
             obs=carry.obs, action=act.action, action_mask=learner_mask, log_prob=act.log_prob,
@@ -307,6 +365,42 @@ class HierarchyRunner:
             success=jnp.where(finished, success, 0.0), decided=decided,
         )
         return new_carry, transition, ends
+
+    def _act_frozen(self, learner_state, obs, mask, key, controls: Controls) -> ActOutput:
+        """The learner picks as the bank will run it once frozen (the level's gate); with no
+        learner (evaluation) its network is not run at all."""
+        def own():
+            return self.agent.policy_logits(learner_state.params, obs)
+
+        shape = jax.eval_shape(own)
+        logits = jax.lax.cond(controls.learner >= 0, own,
+                              lambda: jnp.zeros(shape.shape, shape.dtype))
+        action = self._frozen_pick(jnp.where(mask, logits, -1e9), key).astype(jnp.int32)
+        zeros = jnp.zeros(action.shape, jnp.float32)
+        return ActOutput(action, zeros, zeros)
+
+    def frozen_logits(self, bank_params, obs: jax.Array, controls: Controls) -> jax.Array:
+        """[O, B, A] scores of the frozen policies that can decide now: the learned options
+        other than the learner (the rest are never read and stay 0).
+
+        A loop over just those options, not a vmap over the whole bank: in top-down
+        training most of the bank is not learned yet (level 1: none of it), and a policy's
+        first layer on a wide observation is the tick's largest cost. Under a ``vmap`` over
+        seeds the loop runs as often as the seed with the most learned options needs.
+        """
+        num_options = self.h.num_options
+        need = controls.learned & (jnp.arange(num_options) != controls.learner)
+        order = jnp.argsort(~need)  # the needed option ids first (argsort is stable)
+        first = jax.tree.map(lambda p: p[0], bank_params)
+        shape = jax.eval_shape(self.agent.policy_logits, first, obs)
+        out = jnp.zeros((num_options,) + shape.shape, shape.dtype)
+
+        def one(i, out):
+            option = order[i]
+            params = jax.tree.map(lambda p: p[option], bank_params)
+            return out.at[option].set(self.agent.policy_logits(params, obs))
+
+        return jax.lax.fori_loop(0, need.sum(), one, out)
 
     def _frozen_pick(self, logits: jax.Array, key: jax.Array) -> jax.Array:
         """A frozen policy's choice from masked scores (last axis): argmax or a sample."""

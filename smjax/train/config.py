@@ -61,6 +61,11 @@ class TrainConfig:
       eval_max_ticks: cap on an evaluation episode's length.
       tensorboard: also write TensorBoard event files (OUT/tensorboard) of every level's
         running success and episode count per seed.
+      reset_pool: episode starts generated ahead of each rollout, per seed; an environment
+        whose episode ends takes the next unused one (reused only when more episodes than
+        this end in one rollout). None: ``num_envs``. 0: generate a fresh start for every
+        environment in every tick and keep it where an episode ended (the exact but slow
+        way: the generation costs as much as a step in procedurally generated worlds).
       checkpoint_every: seconds between checkpoints when an output directory is given
         (0: after every chunk); a checkpoint is also written at the end of every level.
     """
@@ -84,6 +89,7 @@ class TrainConfig:
     gate_interval: int = 8
     eval_envs: int = 256
     eval_max_ticks: int = 2000
+    reset_pool: int | None = None
     checkpoint_every: float = 60.0
     tensorboard: bool = False
     agent: dict = field(default_factory=dict)
@@ -106,6 +112,10 @@ class TrainConfig:
             value = getattr(self, name)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, name,
                  "an integer >= 1")
+        need(self.reset_pool is None or (isinstance(self.reset_pool, int)
+                                         and not isinstance(self.reset_pool, bool)
+                                         and self.reset_pool >= 0),
+             "reset_pool", "an integer >= 0, or null for num_envs")
         need(isinstance(self.threshold, (int, float)) and 0 < self.threshold <= 1, "threshold",
              "in (0, 1]")
         need(isinstance(self.gamma, (int, float)) and 0 < self.gamma <= 1, "gamma", "in (0, 1]")
@@ -127,6 +137,11 @@ class TrainConfig:
                 raise ConfigError(f"config field 'levels' for template {name!r}: unknown field(s) "
                                   f"{unknown}; per-level fields: {list(LEVEL_FIELDS)}")
             dataclasses.replace(self, levels={}, **fields)  # validates the override values
+
+    @property
+    def pool_size(self) -> int:
+        """Episode starts per rollout (``reset_pool`` resolved; 0: none, reset every tick)."""
+        return self.num_envs if self.reset_pool is None else self.reset_pool
 
     def for_level(self, template: str) -> "TrainConfig":
         """The config a level trains with: this one plus ``levels[template]``'s overrides."""

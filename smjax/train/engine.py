@@ -7,16 +7,34 @@ templates, masked per option). Seeds are a leading ``vmap`` axis.
 """
 from __future__ import annotations
 
+import time
 from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.agents.smdp import carry_pending
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
 from smjax.train.config import TrainConfig
+
+
+def _same(x):
+    return x
+
+
+def _decide(threshold: float | None) -> tuple:
+    """The episodes program's early-decision inputs (see ``Engine._first_episodes``) for a
+    gate at ``threshold`` (None: run every episode to its end). The float32 bounds are
+    rounded outwards, so a stop agrees with the trainer's float64 comparison."""
+    if threshold is None:
+        return jnp.asarray(False), jnp.asarray(np.inf, jnp.float32), jnp.asarray(-np.inf, jnp.float32)
+    t = np.float32(threshold)
+    up = t if float(t) >= threshold else np.nextafter(t, np.float32(np.inf))
+    down = t if float(t) <= threshold else np.nextafter(t, np.float32(-np.inf))
+    return jnp.asarray(True), jnp.asarray(up), jnp.asarray(down)
 
 
 class SeedState(NamedTuple):
@@ -39,22 +57,26 @@ class Engine:
         mode = frozen_mode(cfg)
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                       frozen_policy=mode, allow_teleport=True,
-                                      reset_on_learner_end=not cfg.continue_episodes)
-        # Evaluation: the final product alone, no teleports (leaf controllers still run).
-        self.eval_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
-                                           frozen_policy=mode, allow_teleport=False)
-        # Acceptance gate: the level's own setting (teleports above, calls from resets), but
-        # the learner acts as it will once frozen; a level ends only when this passes too.
-        self.gate_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
-                                           frozen_policy=mode, allow_teleport=True,
-                                           learner_acts_frozen=True)
+                                      reset_on_learner_end=not cfg.continue_episodes,
+                                      reset_pool=cfg.pool_size)
+        # Gate and evaluation share one runner and one compiled program: the learner acts
+        # as it will once frozen, and teleports are a traced switch (the gate: the level's
+        # own setting, teleports above, calls from resets; evaluation: the final product
+        # alone, no teleports, no learner; scripted leaf controllers run in both).
+        self.episode_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
+                                              frozen_policy=mode, allow_teleport=True,
+                                              learner_acts_frozen=True,
+                                              reset_pool=cfg.pool_size)
         obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
         self.example_obs = obs
         self.num_actions = hierarchy.num_actions
         self.chunk = jax.jit(jax.vmap(self._chunk, in_axes=(0, 0, 0, 0, None, None)),
                              donate_argnums=(0,))
-        self.evaluate = jax.jit(jax.vmap(self._evaluate, in_axes=(0, 0, 0, 0)))
-        self.gate = jax.jit(jax.vmap(self._gate, in_axes=(0, 0, 0, 0, None, None, None, 0)))
+        self.episodes = jax.jit(
+            jax.vmap(self._first_episodes,
+                     in_axes=(0, 0, 0, 0, None, None, None, None, 0, None, None)),
+            static_argnums=(10,))
+        self._compiled_episodes: dict[tuple, Any] = {}
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         self.reset = jax.jit(jax.vmap(self._reset, in_axes=(0, None)))
 
@@ -90,13 +112,17 @@ class Engine:
 
         def update_step(st: SeedState, _):
             key, k_roll, k_upd = jax.random.split(st.key, 3)
+            carry = st.carry
+            if runner.reset_pool:  # fresh episode starts for this rollout
+                carry = runner.refill(carry, jax.random.fold_in(k_roll, 1))
+                k_roll = jax.random.fold_in(k_roll, 0)
 
             def tick_fn(c, k):
                 c, tr, ends = runner.tick(c, k, st.learner, bank, controls)
                 return c, (tr, TickStats.of(ends))
 
             carry, (traj, stats) = jax.lax.scan(
-                tick_fn, st.carry, jax.random.split(k_roll, cfg.rollout_ticks))
+                tick_fn, carry, jax.random.split(k_roll, cfg.rollout_ticks))
             # Decisions whose option still runs train in the next rollout, once complete.
             traj, pending = carry_pending(carry.pending, traj)
             carry = carry.replace(pending=pending)
@@ -109,20 +135,35 @@ class Engine:
         stats = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), stats)
         return new, stats, metrics
 
-    # ---- evaluation: one episode per environment, the first to finish -------------------
-    def _first_episodes(self, runner: HierarchyRunner, key, learner_state, bank, controls,
-                        num_envs: int, max_ticks: int, skip=False) -> dict:
+    # ---- gate and evaluation: one episode per environment, the first to finish ----------
+    def _first_episodes(self, key, learner_state, bank, learned, learner, start, teleport,
+                        max_ticks, skip, decide, num_envs: int) -> dict:
         """Run ``num_envs`` environments until each has finished one learner episode (or
         ``max_ticks``); each environment's first episode counts, so short episodes are not
         over-represented, and one still unfinished at ``max_ticks`` counts as a failure.
         ``skip``: start as finished (under ``vmap`` a skipped seed does not keep the loop
-        running for the others; its result is meaningless)."""
+        running for the others; its result is meaningless).
+
+        ``decide = (on, pass_at, fail_below)``: a gate only needs to know whether the mean
+        success reaches its threshold. With successes in [0, 1], once the finished episodes
+        alone reach ``pass_at``, or even all unfinished ones succeeding could not reach
+        ``fail_below``, the answer is certain and the episodes stop (``on``): the same
+        decision, fewer ticks. The success then reported is the mean so far (unfinished
+        episodes count 0), which lies on the same side of the threshold."""
+        runner = self.episode_runner
+        controls = Controls(learner, start, learned, teleport)
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
+        on, pass_at, fail_below = decide
+
+        def certain(done, success):
+            total = jnp.where(done, success, 0.0).sum() / num_envs
+            best = total + (~done).sum() / num_envs
+            return on & ((total >= pass_at) | (best < fail_below))
 
         def cond(c):
-            _, _, done, _, _, t = c
-            return jnp.logical_and(~done.all(), t < max_ticks)
+            _, _, done, _, success, t = c
+            return ~done.all() & (t < max_ticks) & ~certain(done, success)
 
         def body(c):
             carry, key, done, ret, success, t = c
@@ -139,18 +180,36 @@ class Engine:
         return {"return": ret.mean(), "success": success.mean(), "completed": done.mean(),
                 "env_steps": ticks * num_envs}
 
-    def _evaluate(self, key, bank, learned, learner_state):
-        """The trained hierarchy alone (root on the stack, no teleports, nobody learning)."""
-        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned)
-        # learner_state never decides (no learner in evaluation); the tick needs one
-        return self._first_episodes(self.eval_runner, key, learner_state, bank, controls,
-                                    self.cfg.eval_envs, self.cfg.eval_max_ticks)
+    def _run_episodes(self, args: tuple, num_envs: int) -> tuple[dict, float]:
+        """Call the (once compiled, per ``num_envs``) episodes program; returns its result
+        and the seconds spent compiling it in this call (0 when already compiled)."""
+        sig = (num_envs,) + tuple((x.shape, x.dtype) for x in jax.tree.leaves(args))
+        compile_s = 0.0
+        if sig not in self._compiled_episodes:
+            t0 = time.perf_counter()
+            self._compiled_episodes[sig] = self.episodes.lower(*args, num_envs).compile()
+            compile_s = time.perf_counter() - t0
+        return self._compiled_episodes[sig](*args), compile_s
 
-    def _gate(self, seed_key, state: SeedState, bank, learned, learner, start, attempt, due):
+    def evaluate(self, keys, bank, learned, learner_state, place=_same) -> tuple[dict, float]:
+        """The trained hierarchy alone (root on the stack, no teleports, nobody learning),
+        ``eval_envs`` episodes per seed. ``place`` puts the small per-call inputs where the
+        caller's mesh needs them (every input must be global across processes)."""
+        scalars = place((jnp.asarray(NO_OPTION), jnp.asarray(0), jnp.asarray(False),
+                         jnp.asarray(self.cfg.eval_max_ticks)))
+        skip = place(jnp.zeros((keys.shape[0],), bool))
+        args = (keys, learner_state, bank, learned) + scalars + (skip, place(_decide(None)))
+        return self._run_episodes(args, self.cfg.eval_envs)
+
+    def gate(self, keys, state: SeedState, bank, learned, learner: int, start, due,
+             threshold: float, place=_same) -> tuple[dict, float]:
         """The learner's option as it will be frozen, called where the levels above call it
-        (``attempt`` varies the episodes between attempts, deterministically; a seed not
-        ``due`` is skipped)."""
-        controls = Controls(learner, start, learned)
-        key = jax.random.fold_in(seed_key, attempt)
-        return self._first_episodes(self.gate_runner, key, state.learner, bank, controls,
-                                    self.cfg.gate_envs, self.cfg.gate_max_ticks, skip=~due)
+        (``keys``: per seed, varied between attempts by the caller; a seed not ``due`` is
+        skipped); it stops once passing ``threshold`` or not is certain."""
+        # a template's success is its F_o (0 or 1); the root's is the task's
+        bounded = learner != 0 or self.env.success_in_unit_interval
+        decide = _decide(threshold if bounded else None)
+        scalars = place((jnp.asarray(learner), jnp.asarray(start), jnp.asarray(True),
+                         jnp.asarray(self.cfg.gate_max_ticks)))
+        args = (keys, state.learner, bank, learned) + scalars + (~due, place(decide))
+        return self._run_episodes(args, self.cfg.gate_envs)

@@ -91,6 +91,11 @@ def _split_seeds(keys: jax.Array, n: int) -> list[jax.Array]:
 
 
 @jax.jit
+def _fold_in(keys: jax.Array, data: jax.Array) -> jax.Array:
+    return jax.vmap(jax.random.fold_in, (0, None))(keys, data)
+
+
+@jax.jit
 def _finite_flags(tree) -> jax.Array:
     flags = [jnp.isfinite(x).all() for x in jax.tree.leaves(tree)
              if jnp.issubdtype(x.dtype, jnp.floating)]
@@ -135,7 +140,6 @@ class HierarchyTrainer:
             "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": 0,
         }
         self._compiled = None
-        self._compiled_gate = None
         self._last_save = time.perf_counter()
         self.mesh = training_mesh(S, self.cfg.num_envs)
         self._place()
@@ -157,6 +161,13 @@ class HierarchyTrainer:
             "learned": seed_sharding(self.mesh, arrays["learned"]),
         }
         self.arrays = dist.place(arrays, shardings)
+
+    def _place_small(self, tree):
+        """Small per-call inputs (flags, masks) on the mesh: with several processes every
+        input of a compiled program must be a global array."""
+        if self.mesh is None or not dist.is_multiprocess():
+            return tree
+        return dist.place(tree, seed_sharding(self.mesh, tree))
 
     # ---- checkpoints -------------------------------------------------------------
     def save(self) -> None:
@@ -205,11 +216,11 @@ class HierarchyTrainer:
         keys, k_eval = _split_seeds(_local(self.arrays["keys"]), 2)
         if self.mesh is not None:
             k_eval = dist.place(k_eval, seed_sharding(self.mesh, k_eval))
-        t0 = time.perf_counter()
-        args = (k_eval, self.arrays["bank"], self.arrays["learned"], self.arrays["state"].learner)
-        evaluate = self.engine.evaluate.lower(*args).compile()
-        self.host["compile_seconds"] += time.perf_counter() - t0
-        final = dist.gather(evaluate(*args))
+        final, compile_s = self.engine.evaluate(k_eval, self.arrays["bank"], self.arrays["learned"],
+                                                self.arrays["state"].learner,
+                                                place=self._place_small)
+        self.host["compile_seconds"] += compile_s
+        final = dist.gather(final)
         self.host["wall_seconds"] = time.perf_counter() - t_start
         if self._tb is not None:
             self._tb.close()
@@ -262,7 +273,7 @@ class HierarchyTrainer:
             self.arrays["state"] = state
             candidates = self._account(plan, stats, steps_per_update)
             host["chunks"] += 1
-            passed = self._accept(plan, candidates, learner_arr, start_arr)
+            passed = self._accept(plan, candidates)
             for s in range(len(self.seeds)):
                 if not host["active"][s]:
                     continue
@@ -323,7 +334,7 @@ class HierarchyTrainer:
         return host["episodes"][s] >= cfg.max_episodes_per_level or bool(
             cfg.max_steps_per_level and host["env_steps"][s] >= cfg.max_steps_per_level)
 
-    def _accept(self, plan: LevelPlan, candidates: list[int], learner_arr, start_arr) -> list[int]:
+    def _accept(self, plan: LevelPlan, candidates: list[int]) -> list[int]:
         """Seeds (of ``candidates``, whose running success reached the threshold) whose
         level ends now: all of them without the gate; with it, those whose frozen policy
         passes a gate attempt (tried every ``gate_interval`` chunks, and once more when
@@ -335,20 +346,15 @@ class HierarchyTrainer:
                if host["chunks"] >= host["gate_next"][s] or self._budget_spent(cfg, s)]
         if not due:
             return []
-        counter = jnp.asarray(host["chunks"], jnp.uint32)
-        due_mask = jnp.asarray([s in due for s in range(len(self.seeds))])
-        if self.mesh is not None:
-            due_mask = dist.place(due_mask, seed_sharding(self.mesh, due_mask))
-            if dist.is_multiprocess():
-                counter = dist.place(counter, seed_sharding(self.mesh, counter))
-        args = (self.arrays["keys"], self.arrays["state"], self.arrays["bank"],
-                self.arrays["learned"], learner_arr, start_arr, counter, due_mask)
-        if self._compiled_gate is None:
-            t0 = time.perf_counter()
-            self._compiled_gate = self.engine.gate.lower(*args).compile()
-            host["compile_seconds"] += time.perf_counter() - t0
+        # the attempt number varies the gate's episodes between attempts, deterministically
+        keys = _fold_in(self.arrays["keys"], jnp.asarray(host["chunks"], jnp.uint32))
+        due_mask = self._place_small(jnp.asarray([s in due for s in range(len(self.seeds))]))
         # one vmapped call for all seeds; those not due are skipped (their results unused)
-        result = dist.gather(self._compiled_gate(*args))
+        result, compile_s = self.engine.gate(
+            keys, self.arrays["state"], self.arrays["bank"], self.arrays["learned"],
+            plan.option, plan.start, due_mask, cfg.threshold, place=self._place_small)
+        host["compile_seconds"] += compile_s
+        result = dist.gather(result)
         passed = []
         for s in due:
             success = float(result["success"][s])

@@ -41,8 +41,8 @@ def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 5
         raise ValueError(f"seed_index must be in [0, {len(seeds)}), got {seed_index}")
     bank = jax.tree.map(lambda x: x[seed_index], bank)
     learned = learned[seed_index]
-    runner = engine.eval_runner
-    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned)
+    runner = engine.episode_runner
+    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False))
     key = jax.random.PRNGKey(0) if key is None else key
     key, k_reset, k_init = jax.random.split(key, 3)
     carry = runner.reset(k_reset, controls, 1)

@@ -4,6 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
 from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
@@ -57,6 +58,7 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     """
     from smjax.agents import make_agent
 
+    enable_compilation_cache()  # a second run of the same programs skips compiling
     seeds = validate_seeds(seeds)
     cfg.validate()
     env_overrides = dict(env_overrides or {})

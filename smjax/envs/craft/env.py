@@ -24,6 +24,10 @@ from smjax.envs.craft.structs import (
 class CraftEnv(Environment[CraftState, CraftParams]):
     """One Craft task; ``config`` is static (task, observation kind)."""
 
+    # reward: 1 for the goal item, less 0.1 per other item made, floored at 0, and the
+    # episode ends with it, so an episode's return lies in [0, 1]
+    success_in_unit_interval = True
+
     def __init__(self, config: CraftConfig | None = None):
         self.config = config if config is not None else CraftConfig()
         self.name = f"craft/{self.config.task}"

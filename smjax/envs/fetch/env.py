@@ -32,6 +32,8 @@ from smjax.envs.fetch.state import FetchConfig, FetchParams, FetchState
 class FetchEnv(Environment[FetchState, FetchParams]):
     """Fetch & Stack (see module docstring)."""
 
+    success_in_unit_interval = True  # info["success"] is the score (min(0, r) + N) / N
+
     def __init__(self, config: FetchConfig = FetchConfig()):
         self.config = config
         self.num_blocks = config.num_blocks

@@ -1,0 +1,280 @@
+"""Where a training chunk's time goes, and its FLOPs per env step.
+
+Builds the training ``Engine`` for a task (any environment, hierarchy, learner) with the
+trainer's own shapes (seeds x envs x ticks x updates) at a chosen level, and times, each
+as its own compiled, seed-vmapped program over the same shapes (median of ``--repeats``
+runs, compile timed apart):
+
+* ``chunk``: ``Engine.chunk`` exactly as the trainer calls it (rollouts + updates);
+* ``rollout``: the chunk's rollouts alone (hierarchical ticks, no update);
+* ``update``: the learner's updates alone (on a rollout's trajectory);
+* ``env_step``: the environment's ``step_env`` alone, same number of steps;
+* ``reset``: ``reset_env`` for every environment and tick (what auto-reset costs where
+  the tick generates a fresh episode for every environment);
+* ``policy_bank``: the frozen policies' logits for every option, environment and tick;
+* ``learner_act``: the learner's own action sampling;
+* ``teleports``: every teleport family applied to every environment;
+* ``gate``: one acceptance-gate attempt of the level (``gate_envs`` episodes);
+* ``host_loop``: per-chunk wall time of the real ``HierarchyTrainer`` loop minus the
+  compiled chunk's own time (bookkeeping, progress, transfers).
+
+The isolated parts overlap (the rollout contains the env step, reset, bank and act) and
+do not add up to the chunk exactly: XLA fuses them differently when they run together.
+FLOPs are counted from the networks' layer shapes (dense layers only: 2 x in x out per
+sample and layer; a backward pass is counted as twice the forward).
+
+    python benchmarks/profile_training.py --task craft/get_gem --env observation=compact \
+        --seeds 10 --num-envs 128 --level 1
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+
+
+def _median_time(fn, args, repeats: int) -> tuple[float, float]:
+    """(compile seconds, median run seconds) of ``jax.jit(fn)(*args)``."""
+    t0 = time.perf_counter()
+    compiled = jax.jit(fn).lower(*args).compile()
+    compile_s = time.perf_counter() - t0
+    jax.block_until_ready(compiled(*args))
+    runs = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(compiled(*args))
+        runs.append(time.perf_counter() - t0)
+    return compile_s, statistics.median(runs)
+
+
+def dense_flops(params) -> int:
+    """Multiply-add FLOPs of one forward pass for one sample (2 x in x out per kernel)."""
+    total = 0
+    for path, leaf in jax.tree_util.tree_leaves_with_path(params):
+        if getattr(path[-1], "key", None) == "kernel" and leaf.ndim >= 2:
+            total += 2 * leaf.shape[-2] * leaf.shape[-1]
+    return total
+
+
+def build(args):
+    import smjax
+    from smjax.agents import make_agent
+    from smjax.train.config import TrainConfig
+    from smjax.train.engine import Engine, SeedState
+    from smjax.train.loop import plan_levels, resolve_hierarchy
+
+    overrides = dict(kv.split("=", 1) for kv in args.env)
+    env, params = smjax.make(args.task, **overrides)
+    cfg = TrainConfig(method=args.method, algo=args.algo, num_envs=args.num_envs,
+                      rollout_ticks=args.rollout_ticks, updates_per_chunk=args.updates)
+    _, h = resolve_hierarchy(env, cfg)
+    plans = plan_levels(h, cfg.method)
+    plan = plans[args.level - 1]
+    engine = Engine(env, params, h, make_agent(cfg.algo, **cfg.agent), cfg)
+    S = args.seeds
+    keys = jax.vmap(jax.random.PRNGKey)(jnp.arange(S, dtype=jnp.uint32))
+    split = jax.vmap(lambda k: jax.random.split(k, 3))(keys)
+    learner = engine.init_learner(split[:, 0])
+    start = jnp.asarray(plan.start)
+    state = SeedState(engine.reset(split[:, 1], start), learner, split[:, 2])
+    bank = engine.new_bank(learner)
+    learned = jnp.zeros((S, h.num_options), bool)
+    for earlier in plans[: args.level - 1]:
+        learned = learned.at[:, earlier.option].set(True)
+    return env, params, h, cfg, engine, plan, state, bank, learned, keys
+
+
+def profile(args) -> dict:
+    from smjax.options.runner import Controls
+    from smjax.train.engine import SeedState
+
+    env, params, h, cfg, engine, plan, state, bank, learned, keys = build(args)
+    runner, agent = engine.runner, engine.agent
+    S, B, T, U = args.seeds, cfg.num_envs, cfg.rollout_ticks, cfg.updates_per_chunk
+    steps = S * B * T * U
+    learner_id, start = jnp.asarray(plan.option), jnp.asarray(plan.start)
+    active = jnp.ones((S,), bool)
+    out: dict = {"task": args.task, "env": args.env, "algo": cfg.algo, "level": args.level,
+                 "option": plan.name, "seeds": S, "num_envs": B, "rollout_ticks": T,
+                 "updates_per_chunk": U, "env_steps_per_chunk": steps,
+                 "device": jax.devices()[0].platform, "parts": {}}
+
+    def record(name, fn, fn_args, n=steps):
+        compile_s, run_s = _median_time(fn, fn_args, args.repeats)
+        out["parts"][name] = {"seconds": run_s, "compile_seconds": compile_s,
+                              "env_steps_per_second": n / run_s}
+        print(f"{name:12s} {run_s:8.3f} s  compile {compile_s:6.1f} s  "
+              f"{n / run_s:12,.0f} env steps/s", flush=True)
+
+    # the whole chunk, as the trainer calls it (no donation here, so it can repeat)
+    chunk = jax.vmap(engine._chunk, in_axes=(0, 0, 0, 0, None, None))
+    record("chunk", lambda st: chunk(st, active, bank, learned, learner_id, start)[1], (state,))
+
+    def rollout_one(st: SeedState, bank_s, learned_s):
+        controls = Controls(learner_id, start, learned_s)
+
+        def tick_fn(c, k):
+            c, tr, _ = runner.tick(c, k, st.learner, bank_s, controls)
+            return c, tr
+
+        def one(c, k):
+            if hasattr(runner, "refill"):  # the reset pool, refilled before every rollout
+                c = runner.refill(c, jax.random.fold_in(k, 1))
+            return jax.lax.scan(tick_fn, c, jax.random.split(k, T))
+
+        carry, traj = jax.lax.scan(one, st.carry, jax.random.split(st.key, U))
+        return traj
+
+    rollout = jax.vmap(rollout_one)
+    record("rollout", lambda st: rollout(st, bank, learned).reward.sum(), (state,))
+    traj = jax.jit(rollout)(state, bank, learned)
+    traj0 = jax.tree.map(lambda x: x[:, 0], traj)  # one rollout per seed [S, T, B, ...]
+
+    def updates(st: SeedState, tr):
+        def body(ls, k):
+            ls, _ = agent.update(ls, tr, k)
+            return ls, None
+
+        ls, _ = jax.lax.scan(body, st.learner, jax.random.split(st.key, U))
+        return ls
+
+    record("update", jax.vmap(updates), (state, traj0))
+
+    env_state = state.carry.env_state
+    actions = jnp.zeros((S, B), jnp.int32)
+
+    def env_steps(es, acts, key):
+        def body(s, k):
+            ks = jax.random.split(k, B)
+            _, s, r, *_ = jax.vmap(env.step_env, (0, 0, 0, None))(ks, s, acts, params)
+            return s, r.sum()
+
+        return jax.lax.scan(body, es, jax.random.split(key, T * U))[1].sum()
+
+    record("env_step", jax.vmap(env_steps), (env_state, actions, keys))
+
+    def resets(key):
+        def body(c, k):
+            obs, s = jax.vmap(env.reset_env, (0, None))(jax.random.split(k, B), params)
+            return c + jnp.asarray(obs, jnp.float32).sum(), None
+
+        return jax.lax.scan(body, 0.0, jax.random.split(key, T * U))[0]
+
+    record("reset", jax.vmap(resets), (keys,))
+
+    obs = state.carry.obs
+
+    def bank_logits(bank_s, obs_s, learned_s):
+        def body(c, _):
+            if hasattr(runner, "frozen_logits"):  # only the options that can decide
+                lg = runner.frozen_logits(bank_s, obs_s + c * 0,
+                                          Controls(learner_id, start, learned_s))
+            else:
+                lg = jax.vmap(agent.policy_logits, (0, None))(bank_s, obs_s + c * 0)
+            return c + lg.sum() * 1e-9, None
+
+        return jax.lax.scan(body, 0.0, None, T * U)[0]
+
+    record("policy_bank", jax.vmap(bank_logits), (bank, obs, learned))
+
+    mask = jnp.ones((S, B, h.num_actions), bool)
+
+    def acts(ls, obs_s, mask_s, key):
+        def body(c, k):
+            a = agent.act(ls, obs_s, mask_s, k)
+            return c + a.log_prob.sum(), None
+
+        return jax.lax.scan(body, 0.0, jax.random.split(key, T * U))[0]
+
+    record("learner_act", jax.vmap(acts), (state.learner, obs, mask, keys))
+
+    if runner.teleport_families:
+        chosen = jnp.ones((S, B), jnp.int32)  # every environment calls option 1's teleport
+
+        def teleports(es, ch, key):
+            def body(c, k):
+                s, a = runner._run_family(runner.teleport_families, k, es, ch,
+                                          jnp.zeros((B,), runner.action_dtype), controls=False)
+                return c + a.sum(), None
+
+            return jax.lax.scan(body, 0, jax.random.split(key, T * U))[0]
+
+        record("teleports", jax.vmap(teleports), (env_state, chosen, keys))
+
+    gate_s, gate_compile, gate_steps = time_gate(engine, keys, state, bank, learned, learner_id,
+                                                 start, active)
+    out["parts"]["gate"] = {"seconds": gate_s, "compile_seconds": gate_compile,
+                            "env_steps": gate_steps,
+                            "env_steps_per_second": gate_steps / gate_s}
+    print(f"{'gate':12s} {gate_s:8.3f} s  compile {gate_compile:6.1f} s  "
+          f"{gate_steps / gate_s:12,.0f} env steps/s ({gate_steps:,} steps)", flush=True)
+
+    learner_params = jax.tree.map(lambda x: x[0], state.learner.params)
+    per_fwd = dense_flops(learner_params)
+    bank_fwd = dense_flops(jax.tree.map(lambda x: x[0, 0], bank))
+    out["flops"] = flops_per_step(cfg, agent.name, per_fwd, bank_fwd, h.num_options)
+    print("FLOPs per env step:", json.dumps(out["flops"]), flush=True)
+    return out
+
+
+def time_gate(engine, keys, state, bank, learned, learner_id, start, active):
+    """(seconds, compile seconds, env steps) of one gate attempt for every seed."""
+    if isinstance(getattr(engine, "gate", None), jax.stages.Wrapped):  # before 2026-11-23
+        args = (keys, state, bank, learned, learner_id, start, jnp.asarray(0, jnp.uint32), active)
+        t0 = time.perf_counter()
+        compiled = engine.gate.lower(*args).compile()
+        compile_s = time.perf_counter() - t0
+        call = lambda: compiled(*args)  # noqa: E731
+    else:
+        gate_args = (keys, state, bank, learned, int(learner_id), int(start), active,
+                     engine.cfg.threshold)
+        compile_s = engine.gate(*gate_args)[1]
+        call = lambda: engine.gate(*gate_args)[0]  # noqa: E731
+    jax.block_until_ready(call())
+    t0 = time.perf_counter()
+    res = jax.block_until_ready(call())
+    return time.perf_counter() - t0, compile_s, int(jnp.sum(res["env_steps"]))
+
+
+def flops_per_step(cfg, algo: str, learner_fwd: int, bank_fwd: int, num_options: int) -> dict:
+    """Dense-layer FLOPs per env step: acting, frozen policies, and the update (whose
+    backward counts twice its forward)."""
+    agent_cfg = cfg.agent
+    if algo in ("ppo",):
+        epochs = agent_cfg.get("update_epochs", 4)
+        update = 3 * learner_fwd * epochs
+    elif algo == "actor-critic":
+        update = 3 * learner_fwd
+    else:  # dqn: replay updates are not per env step; left out
+        update = 0
+    return {"act": learner_fwd, "policy_bank": bank_fwd * num_options, "update": update,
+            "total": learner_fwd + bank_fwd * num_options + update}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--task", default="craft/get_gem")
+    ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
+                    help="environment override, repeatable (e.g. observation=compact)")
+    ap.add_argument("--method", default="top-down")
+    ap.add_argument("--algo", default="ppo")
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--num-envs", type=int, default=128)
+    ap.add_argument("--rollout-ticks", type=int, default=32)
+    ap.add_argument("--updates", type=int, default=4, help="updates (rollouts) per chunk")
+    ap.add_argument("--level", type=int, default=1, help="which planned level (1 = first)")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--json", help="also write the result here")
+    args = ap.parse_args(argv)
+    out = profile(args)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

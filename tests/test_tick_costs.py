@@ -1,0 +1,148 @@
+"""The tick's cost cuts keep its meaning: frozen policies only where they can decide, episode
+starts from a pool, gates that stop once their answer is certain, the compilation cache."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hier_env import KeyDoor, make_keydoor
+from smjax.agents import make_agent
+from smjax.options.runner import NO_OPTION, Controls, HierarchyRunner
+from smjax.train.config import TrainConfig
+from smjax.train.engine import Engine, SeedState
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _runner(reset_pool: int = 0):
+    env = KeyDoor()
+    h = env.hierarchies()["paper"]
+    agent = make_agent("ppo", hidden_sizes=(16,))
+    return env, h, agent, HierarchyRunner(env, env.default_params, h, agent, gamma=0.9,
+                                          reset_pool=reset_pool)
+
+
+_ENV, _H, _AGENT, _RUNNER = _runner()
+_OBS = _ENV.reset_env(jax.random.PRNGKey(0), _ENV.default_params)[0]
+_BANK = jax.vmap(lambda k: _AGENT.init(k, _OBS, _H.num_actions).params)(
+    jax.random.split(jax.random.PRNGKey(1), _H.num_options))
+_FROZEN = jax.jit(lambda bank, obs, learned, learner: _RUNNER.frozen_logits(
+    bank, obs, Controls(learner, jnp.asarray(0), learned)))
+
+
+@settings(max_examples=12, deadline=None)
+@given(learned=st.lists(st.booleans(), min_size=2, max_size=2), learner=st.sampled_from([-1, 0, 1]))
+def test_frozen_logits_equal_the_whole_bank_where_an_option_can_decide(learned, learner):
+    obs = jax.vmap(lambda k: _ENV.reset_env(k, _ENV.default_params)[0])(
+        jax.random.split(jax.random.PRNGKey(2), 5))
+    got = np.asarray(_FROZEN(_BANK, obs, jnp.asarray(learned), jnp.asarray(learner)))
+    full = np.asarray(jax.vmap(_AGENT.policy_logits, (0, None))(_BANK, obs))
+    for option in range(_H.num_options):
+        if learned[option] and option != learner:
+            np.testing.assert_allclose(got[option], full[option], rtol=1e-5, atol=1e-6)
+        else:  # never read by the tick, and not computed
+            assert (got[option] == 0).all()
+
+
+def test_reset_pool_hands_out_each_start_once_before_reusing():
+    env, h, agent, runner = _runner(reset_pool=5)
+    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.zeros((2,), bool))
+    carry = runner.reset(jax.random.PRNGKey(0), controls, 4)
+    pool_pos = np.asarray(carry.pool.state.pos)
+    reset = jnp.asarray([True, False, True, True])
+    obs, state, pool = runner._next_starts(carry, reset, jax.random.PRNGKey(1))
+    np.testing.assert_array_equal(np.asarray(state.pos)[[0, 2, 3]], pool_pos[[0, 1, 2]])
+    assert int(pool.next) == 3
+    carry = carry.replace(pool=pool)
+    obs, state, pool = runner._next_starts(carry, jnp.asarray([True, True, True, False]),
+                                           jax.random.PRNGKey(2))
+    # slots 3, 4, then the pool wraps around to its first start
+    np.testing.assert_array_equal(np.asarray(state.pos)[:3], pool_pos[[3, 4, 0]])
+    assert int(pool.next) == 1
+    refilled = runner.refill(carry.replace(pool=pool), jax.random.PRNGKey(3))
+    assert int(refilled.pool.next) == 0
+
+
+def test_a_run_with_the_pool_trains_and_keeps_the_results_contract():
+    cfg = TrainConfig(num_envs=16, rollout_ticks=8, updates_per_chunk=2, max_episodes_per_level=200,
+                      success_window=16, gate_envs=16, eval_envs=16, reset_pool=16)
+    res = __import__("smjax.train.run", fromlist=["run"]).run(make_keydoor(), cfg, [0], progress=False)
+    assert sum(res["levels"][0]["episodes"]) > 0 and len(res["final_success"]) == 1
+
+
+def _engine(threshold_cfg: TrainConfig) -> tuple[Engine, SeedState]:
+    env, params = make_keydoor()
+    h = env.hierarchies()["paper"]
+    engine = Engine(env, params, h, make_agent("ppo", hidden_sizes=(16,)), threshold_cfg)
+    keys = jax.random.split(jax.random.PRNGKey(0), 3)
+    learner = engine.init_learner(keys)
+    state = SeedState(engine.reset(keys, jnp.asarray(0)), learner, keys)
+    return engine, state
+
+
+def test_gate_stops_early_with_the_same_decision():
+    cfg = TrainConfig(num_envs=8, gate_envs=32, gate_max_ticks=200)
+    engine, state = _engine(cfg)
+    bank = engine.new_bank(state.learner)
+    learned = jnp.zeros((3, engine.h.num_options), bool)
+    keys = jax.random.split(jax.random.PRNGKey(5), 3)
+    due = jnp.ones((3,), bool)
+    for threshold in (0.05, 0.3, 0.6, 0.95):
+        # the key-door return is 1 for an opened door, else 0: a success in [0, 1]
+        engine.env.success_in_unit_interval = True
+        early, _ = engine.gate(keys, state, bank, learned, 0, 0, due, threshold)
+        # the same episodes without stopping early (as for an unbounded success range)
+        engine.env.success_in_unit_interval = False
+        full, _ = engine.gate(keys, state, bank, learned, 0, 0, due, threshold)
+        np.testing.assert_array_equal(np.asarray(early["success"]) >= threshold,
+                                      np.asarray(full["success"]) >= threshold)
+        assert (np.asarray(early["env_steps"]) <= np.asarray(full["env_steps"])).all()
+
+
+def test_evaluation_and_gate_share_one_compiled_program():
+    cfg = TrainConfig(num_envs=8, gate_envs=16, eval_envs=16, gate_max_ticks=50, eval_max_ticks=50)
+    engine, state = _engine(cfg)
+    bank = engine.new_bank(state.learner)
+    learned = jnp.zeros((3, engine.h.num_options), bool).at[:, 0].set(True)
+    keys = jax.random.split(jax.random.PRNGKey(5), 3)
+    _, first = engine.gate(keys, state, bank, learned, 1, 0, jnp.ones((3,), bool), 0.8)
+    result, second = engine.evaluate(keys, bank, learned, state.learner)
+    assert first > 0 and second == 0.0 and len(engine._compiled_episodes) == 1
+    assert np.asarray(result["completed"]).shape == (3,)
+
+
+_TWICE = """
+import json, sys
+from hier_env import make_keydoor
+from smjax.train import TrainConfig
+from smjax.train.run import run
+cfg = TrainConfig(num_envs=8, rollout_ticks=4, updates_per_chunk=1, max_episodes_per_level=8,
+                  success_window=4, gate=False, eval_envs=8, eval_max_ticks=20)
+print(json.dumps(run(make_keydoor(), cfg, [0], progress=False)["compile_seconds"]))
+"""
+
+
+def _run_in_subprocess(env_vars: dict) -> float:
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    env.update(env_vars, PYTHONPATH=os.pathsep.join([str(ROOT / "tests"), str(ROOT)]))
+    out = subprocess.run([sys.executable, "-c", _TWICE], env=env, capture_output=True,
+                         text=True, check=True, timeout=600)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_a_second_identical_run_loads_its_programs_from_the_cache(tmp_path):
+    cache = tmp_path / "cache"
+    first = _run_in_subprocess({"SMJAX_CACHE_DIR": str(cache)})
+    assert any(cache.iterdir()), "the first run wrote no compiled programs"
+    second = _run_in_subprocess({"SMJAX_CACHE_DIR": str(cache)})
+    assert second < 0.5 * first, (first, second)
+    off = tmp_path / "off"
+    _run_in_subprocess({"SMJAX_CACHE_DIR": str(off), "SMJAX_COMPILATION_CACHE": "0"})
+    assert not off.exists()  # the opt-out writes nothing
