@@ -363,7 +363,8 @@ def _watch(latest: Path, stop: threading.Event, misses: list, seen: list) -> Non
 
 def test_latest_never_dangles_and_a_second_run_is_refused(tmp_path, capsys):
     out = tmp_path / "shared"
-    proc = _start(out, TINY)
+    # no gate (one program less to compile), a short budget: saves at every chunk and boundary
+    proc = _start(out, TINY | {"gate": False, "max_episodes_per_level": 120})
     latest = out / "checkpoints" / ckpt.LATEST
     stop, misses, seen = threading.Event(), [], []
     watcher = threading.Thread(target=_watch, args=(latest, stop, misses, seen), daemon=True)
@@ -400,6 +401,9 @@ def test_kills_at_random_instants_never_lose_the_checkpoint(tmp_path):
     latest = lambda: out / "checkpoints" / ckpt.LATEST  # noqa: E731
     while kills < 50:
         before = latest().read_text() if latest().exists() else None
+        if before is None and out.exists():  # killed before its first checkpoint: nothing to
+            runs += 1                         # lose; a fresh directory (--overwrite's case)
+            out = tmp_path / f"run{runs}"
         proc = _start(out, cfg, resume=before is not None)
         if rng.random() < 0.2:  # now and then during start-up or compile
             time.sleep(rng.uniform(0.0, 8.0))

@@ -55,14 +55,23 @@ def check_out_dir(out: Path) -> None:
                           f"permissions or choose another directory") from None
 
 
+def _holds_checkpoint(folder: Path) -> bool:
+    """A checkpoints folder with anything resumable: latest.json or a complete step (an
+    orbax temporary of a save killed before the first checkpoint holds nothing)."""
+    return any(c.name == "latest.json" or (c.name.startswith("step-")
+                                           and ".orbax-checkpoint-tmp" not in c.name)
+               for c in folder.iterdir())
+
+
 def existing_run_files(out: Path) -> list[str]:
-    """The run files ``out`` holds (an empty ``checkpoints`` folder does not count)."""
+    """The run files ``out`` holds (a checkpoints folder only when it holds a checkpoint)."""
     found = []
     for name in RUN_FILES:
         p = out / name
-        if p.is_dir() and any(p.iterdir()):
-            found.append(name)
-        elif p.is_file():
+        if name == "checkpoints" and p.is_dir():
+            if _holds_checkpoint(p):
+                found.append(name)
+        elif p.is_file() or (p.is_dir() and any(p.iterdir())):
             found.append(name)
     return found
 
