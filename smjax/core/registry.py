@@ -12,6 +12,8 @@ import inspect
 from dataclasses import dataclass
 from typing import Any, Callable
 
+from smjax.core.overrides import coerce_annotated
+
 # Modules whose import registers tasks. Order is the listing order.
 ENV_MODULES = ("smjax.envs.craft", "smjax.envs.fetch", "smjax.envs.football")
 
@@ -83,6 +85,20 @@ def get_entry(name: str) -> RegistryEntry:
     return _REGISTRY[name]
 
 
+def coerce_overrides(entry: RegistryEntry, overrides: dict[str, Any]) -> dict[str, Any]:
+    """Parse text and booleans by the factory parameter's type, strictly and alike for every
+    environment (``checkpoint_reward="no"`` is False, never ``bool("no")``). Numbers go to
+    the factory as they are: it checks them with the same parsers and knows their range."""
+    params = inspect.signature(entry.factory).parameters
+    out = {}
+    for k, v in overrides.items():
+        p = params[k]
+        if isinstance(v, str) or str(p.annotation).replace(" ", "") in ("bool", "bool|None"):
+            v = coerce_annotated(f"{entry.name} override {k!r}", v, p.annotation, p.default)
+        out[k] = v
+    return out
+
+
 def make(name: str, **overrides: Any) -> tuple[Any, Any]:
     """Make an environment and its default params: ``env, params = make("craft/get_gem")``.
 
@@ -96,6 +112,6 @@ def make(name: str, **overrides: Any) -> tuple[Any, Any]:
             f"unknown override(s) {unknown} for {name!r}; valid overrides: "
             f"{', '.join(valid) if valid else '(none)'}"
         )
-    env, params = entry.factory(**overrides)
+    env, params = entry.factory(**coerce_overrides(entry, overrides))
     env.name = name
     return env, params

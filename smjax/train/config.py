@@ -126,6 +126,10 @@ class TrainConfig:
         need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
         need(isinstance(self.gate, bool), "gate", "true or false")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
+        if "gamma" in self.agent:  # one source: the trainer discounts with TrainConfig.gamma
+            raise ConfigError(f"agent field 'gamma' = {self.agent['gamma']!r} would be ignored: the "
+                              f"discount is the config field 'gamma'; set it with --set gamma=X "
+                              f"(TrainConfig(gamma=X))")
         need(isinstance(self.max_steps_per_level, int) and not isinstance(self.max_steps_per_level, bool)
              and self.max_steps_per_level >= 0, "max_steps_per_level", "an integer >= 0 (0: no step budget)")
         need(isinstance(self.levels, dict) and all(isinstance(k, str) and isinstance(v, dict)
@@ -162,27 +166,80 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "TrainConfig":
+        """A config from a mapping, values parsed strictly by each field's type (``"no"`` is
+        False, ``16.0`` is 16, ``2.5`` for an integer field and NaN are refused)."""
         if not isinstance(data, dict):
             raise ConfigError(f"a config must be a mapping of fields, got {type(data).__name__}")
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names, key=repr)  # key=repr: keys may be of any type
         if unknown:
             raise ConfigError(f"unknown config field(s) {unknown}; valid fields: {sorted(names)}")
-        return cls(**data)
+        return cls(**_parsed_fields(cls, data))
 
     @classmethod
     def from_file(cls, path: str | Path) -> "TrainConfig":
-        path = Path(path)
-        import yaml
+        return cls.from_dict(read_config_file(path))
 
-        try:  # undecodable bytes and syntax errors become one error type naming the file
-            text = path.read_text()
-            data = yaml.safe_load(text) if path.suffix in (".yaml", ".yml") else json.loads(text)
-        except (ValueError, yaml.YAMLError) as err:
-            raise ConfigError(f"config file {path} cannot be parsed: {err}") from err
-        if not isinstance(data, dict):
-            raise ConfigError(f"config file {path} must hold a mapping of fields, got {type(data).__name__}")
-        return cls.from_dict(data)
+
+def read_config_file(path: str | Path) -> dict:
+    """The fields a YAML/JSON config file sets (validated; defaults not filled in, so a
+    resume is refused only for fields the file really sets)."""
+    path = Path(path)
+    import yaml
+
+    if not path.is_file():
+        what = "is a directory" if path.is_dir() else "does not exist"
+        raise ConfigError(f"config file {path} {what}; pass a YAML or JSON file of TrainConfig fields")
+    try:  # undecodable bytes and syntax errors become one error type naming the file
+        text = path.read_text()
+        data = yaml.safe_load(text) if path.suffix in (".yaml", ".yml") else json.loads(text)
+    except (OSError, ValueError, yaml.YAMLError) as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise ConfigError(f"config file {path} cannot be read or parsed: {first}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"config file {path} must hold a mapping of fields, got "
+                          f"{type(data).__name__}")
+    try:
+        TrainConfig.from_dict(data)
+    except (ConfigError, TypeError, ValueError) as err:
+        raise ConfigError(f"config file {path}: {err}") from None
+    return _parsed_fields(TrainConfig, data)
+
+
+def _parsed_fields(cls, data: dict) -> dict:
+    """``data`` with scalar values parsed by the type of the field's default."""
+    from smjax.core.overrides import coerce_like
+
+    defaults = {f.name: f.default for f in dataclasses.fields(cls)
+                if f.default is not dataclasses.MISSING}
+    out = dict(data)
+    try:
+        for name, value in data.items():
+            if name in defaults and defaults[name] is not None:
+                out[name] = coerce_like(f"config field {name!r}", value, defaults[name])
+        if isinstance(out.get("agent"), dict):
+            out["agent"] = normalize_agent(out.get("algo", cls.algo), out["agent"])
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    return out
+
+
+def normalize_agent(algo: Any, agent: dict) -> dict:
+    """Learner overrides parsed by the type of the learner config's field (``"no"`` -> False,
+    ``(32, 32)`` -> [32, 32], as JSON stores it, so a resumed run compares equal)."""
+    from smjax.core.overrides import coerce_like
+
+    if algo not in ALGOS:
+        return dict(agent)  # validate() names the bad algo
+    from smjax.agents import default_config
+
+    defaults = dataclasses.asdict(default_config(algo))
+    out = {}
+    for name, value in agent.items():
+        if name in defaults:
+            value = coerce_like(f"agent field {name!r}", value, defaults[name])
+        out[name] = list(value) if isinstance(value, tuple) else value
+    return out
 
 
 def config_differences(a: dict, b: dict) -> list[str]:

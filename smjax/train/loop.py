@@ -29,7 +29,7 @@ from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
 
 
 class NonFiniteError(FloatingPointError):
-    """A learner produced non-finite parameters; the last good checkpoint is kept."""
+    """A learner produced non-finite parameters (``run`` says which checkpoint is kept)."""
 
 
 @dataclass
@@ -268,8 +268,7 @@ class HierarchyTrainer:
             if not _all_finite(state.learner.params):
                 raise NonFiniteError(
                     f"non-finite learner parameters at level {plan.level} ({plan.name}) after "
-                    f"{max(host['episodes'])} episodes (chunk {host['chunks']}); the last good "
-                    f"checkpoint is kept")
+                    f"{max(host['episodes'])} episodes (chunk {host['chunks']})")
             self.arrays["state"] = state
             candidates = self._account(plan, stats, steps_per_update)
             host["chunks"] += 1

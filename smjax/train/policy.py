@@ -15,14 +15,19 @@ from smjax.train.engine import Engine
 from smjax.train.loop import HierarchyTrainer, plan_levels, resolve_hierarchy
 
 
-def load_trained(run_dir: str | Path):
-    """(engine, bank, learned, seeds) of the run checkpointed in ``run_dir``."""
+def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None = None):
+    """(engine, bank, learned, seeds) of the run checkpointed in ``run_dir``.
+
+    A run stopped before its last level would play a partly untrained hierarchy: refused
+    unless ``partial``. ``task``, when given, must be the run's task."""
     from smjax.agents import make_agent
 
     info = ckpt.load_meta(run_dir)
     if info is None:
         raise FileNotFoundError(f"{run_dir} holds no checkpoint (train with --out {run_dir} first)")
     run = info["meta"]["run"]
+    if task is not None and run["task"] != task:
+        raise ValueError(f"{run_dir} is a run of {run['task']!r}, not {task!r}")
     fields = set(TrainConfig.__dataclass_fields__)
     cfg = TrainConfig.from_dict({k: v for k, v in run.items() if k in fields})
     env, params = make(run["task"], **run["env_overrides"])
@@ -31,12 +36,18 @@ def load_trained(run_dir: str | Path):
     trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), run["seeds"],
                                out_dir=run_dir, progress=False, run_meta=run)
     trainer.restore()
+    done, total = trainer.host["plan_index"], len(trainer.plans)
+    if done < total and not partial:
+        raise ValueError(f"{run_dir} stopped after {done} of {total} levels, so its hierarchy is "
+                         f"partly untrained; finish it with `smjax train {run['task']} --resume "
+                         f"{run_dir}`, or pass --partial to play it anyway")
     return engine, trainer.arrays["bank"], trainer.arrays["learned"], run["seeds"]
 
 
-def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 500, key=None):
+def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 500, key=None,
+                 partial: bool = False, task: str | None = None):
     """States of one episode of the trained hierarchy (no teleports), seed ``seed_index``."""
-    engine, bank, learned, seeds = load_trained(run_dir)
+    engine, bank, learned, seeds = load_trained(run_dir, partial=partial, task=task)
     if not 0 <= seed_index < len(seeds):
         raise ValueError(f"seed_index must be in [0, {len(seeds)}), got {seed_index}")
     bank = jax.tree.map(lambda x: x[seed_index], bank)

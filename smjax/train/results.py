@@ -29,13 +29,48 @@ def _clean(x: Any) -> Any:
     return x
 
 
+def _default_mode() -> int:
+    """What ``open()`` would give a new file (0644 under the usual umask 022): mkstemp's
+    0600 would make results.json private while curves.png is not."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+FILE_MODE = _default_mode()
+
+
+def fsync_dir(path: Path) -> None:
+    """Make a rename or a new entry in ``path`` durable (a no-op where directories cannot
+    be opened)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def atomic_write_text(path: Path, text: str) -> None:
-    """Write via a temporary file and rename, so a crash never leaves half a file."""
+    """Write via a fsynced temporary file and rename, so a crash never leaves half a file
+    (nor, after a power loss, an empty one)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, FILE_MODE)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    fsync_dir(path.parent)
 
 
 def build_results(env_name: str, method: str, algo: str, seeds: list[int], threshold: float,
@@ -72,7 +107,7 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
 def write_results(out_dir: str | Path, results: dict, curves: list[tuple]) -> None:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "results.json", json.dumps(results, indent=2) + "\n")
+    atomic_write_text(out / "results.json", json.dumps(results, indent=2, allow_nan=False) + "\n")
     rows = [",".join(CURVE_COLUMNS)]
     for row in curves:
         seed, level, template, eps, steps, ret = row

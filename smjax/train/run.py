@@ -1,6 +1,8 @@
 """One entry point for every method: make the env, resolve the hierarchy, train, write results."""
 from __future__ import annotations
 
+import json
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -8,9 +10,11 @@ from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
 from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
-from smjax.train.config import ConfigError, TrainConfig, config_differences
+from smjax.train.config import ConfigError, TrainConfig, config_differences, normalize_agent
 from smjax.train.engine import Engine
-from smjax.train.loop import HierarchyTrainer, plan_levels, resolve_hierarchy
+from smjax.train.loop import HierarchyTrainer, NonFiniteError, plan_levels, resolve_hierarchy
+from smjax.train.memory import check_fits
+from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.results import build_results, write_results
 
 
@@ -26,9 +30,15 @@ def validate_seeds(seeds) -> list[int]:
     return seeds
 
 
+# settings that do not change what a run computes: a resume may change them
+RESUME_FREE_FIELDS = ("tensorboard", "checkpoint_every")
+
+
 def run_identity(task_name: str, cfg: TrainConfig, seeds: list[int], env_overrides: dict) -> dict:
-    """What must match for a checkpoint to be resumed."""
-    return {"task": task_name, "seeds": seeds, "env_overrides": env_overrides} | cfg.to_dict()
+    """What must match for a checkpoint to be resumed (as JSON stores it: tuples are lists,
+    so a resumed run compares equal to what its checkpoint saved)."""
+    identity = {"task": task_name, "seeds": seeds, "env_overrides": env_overrides} | cfg.to_dict()
+    return json.loads(json.dumps(identity))
 
 
 def check_resumable(out_dir, identity: dict) -> bool:
@@ -37,15 +47,44 @@ def check_resumable(out_dir, identity: dict) -> bool:
     if info is None:
         return False
     saved = info["meta"]["run"]
-    diff = config_differences(saved, identity)
+    diff = [k for k in config_differences(saved, identity) if k not in RESUME_FREE_FIELDS]
     if diff:
         details = ", ".join(f"{k}: checkpoint {saved.get(k)!r} vs now {identity.get(k)!r}" for k in diff)
         raise ConfigError(f"cannot resume {out_dir}: the run differs in {details}")
     return True
 
 
+def _claim_out_dir(out_dir, resume: bool, overwrite: bool) -> DirLock | None:
+    """Validate and lock ``out_dir`` on process 0; every process raises alike."""
+    lock, error = None, None
+    if dist.is_writer():
+        try:
+            lock = prepare_out_dir(out_dir, resume=resume, overwrite=overwrite)
+        except OutDirError as err:
+            if not dist.is_multiprocess():
+                raise
+            error = str(err)
+    if dist.is_multiprocess():
+        error = dist.broadcast_json(error)
+    if error:
+        raise OutDirError(error)
+    return lock
+
+
+def _warn_unreachable_windows(cfg: TrainConfig, plans) -> None:
+    """A success window longer than the episode budget makes the threshold unreachable."""
+    for plan in plans:
+        level = cfg.for_level(plan.name)
+        if level.success_window > level.max_episodes_per_level:
+            warnings.warn(
+                f"level {plan.name!r}: success_window {level.success_window} exceeds "
+                f"max_episodes_per_level {level.max_episodes_per_level}, so its running success "
+                f"can never reach the threshold; lower success_window", stacklevel=3)
+
+
 def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None = None, *,
-        env_overrides: dict | None = None, progress: bool = True, resume: bool = False) -> dict:
+        env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
+        overwrite: bool = False) -> dict:
     """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
 
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
@@ -55,13 +94,29 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     every process running this same call) they train together and only process 0 reads
     and writes ``out_dir``. ``resume=True`` continues from ``out_dir``'s last checkpoint; a checkpoint of
     a different configuration is refused (the error names the differing fields).
+    ``out_dir`` is validated and locked before anything compiles: a directory in use by
+    another run, or holding a run's files without ``resume`` or ``overwrite`` (which
+    deletes them), is refused.
     """
-    from smjax.agents import make_agent
-
     enable_compilation_cache()  # a second run of the same programs skips compiling
     seeds = validate_seeds(seeds)
     cfg.validate()
+    cfg = cfg.replace(agent=normalize_agent(cfg.algo, cfg.agent))
     env_overrides = dict(env_overrides or {})
+    if resume and out_dir is None:
+        raise ValueError("resume needs the run's output directory")
+    lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
+    try:
+        return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides: dict,
+                progress: bool, resume: bool) -> dict:
+    from smjax.agents import make_agent
+
     if isinstance(task, str):
         env, env_params = make(task, **env_overrides)
     else:
@@ -70,23 +125,28 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     # with several processes process 0's view of out_dir decides, so all raise alike
     existing = ckpt.shared_meta(out_dir) if out_dir is not None else None
     if resume:
-        if out_dir is None:
-            raise ValueError("resume needs the run's output directory")
         if existing is None:
             raise FileNotFoundError(f"nothing to resume: no checkpoint in {ckpt.checkpoint_dir(out_dir)}")
         check_resumable(out_dir, identity)
-    elif existing is not None:
+    elif existing is not None:  # (prepare_out_dir refuses this first; kept for safety)
         raise FileExistsError(
             f"{out_dir} already holds a checkpointed run; pass resume (--resume) to continue it "
             f"or choose another output directory")
     hierarchy_name, hierarchy = resolve_hierarchy(env, cfg)
+    plans = plan_levels(hierarchy, cfg.method)
+    cfg.check_level_names([p.name for p in plans])
+    _warn_unreachable_windows(cfg, plans)
+    check_fits(env, env_params, cfg, len(seeds))
     agent = make_agent(cfg.algo, **cfg.agent)
     engine = Engine(env, env_params, hierarchy, agent, cfg)
-    trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), seeds,
-                               out_dir=out_dir, progress=progress, run_meta=identity)
+    trainer = HierarchyTrainer(engine, plans, seeds, out_dir=out_dir, progress=progress,
+                               run_meta=identity)
     if resume:
         trainer.restore()
-    raw = trainer.run()
+    try:
+        raw = trainer.run()
+    except NonFiniteError as err:
+        raise NonFiniteError(f"{err}; {_kept(out_dir)}") from None
     config = cfg.to_dict() | {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides}
     results = build_results(env.name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config)
     if out_dir is not None and dist.is_writer():
@@ -94,3 +154,15 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     results_with_raw: dict[str, Any] = dict(results)
     results_with_raw["_raw"] = raw
     return results_with_raw
+
+
+def _kept(out_dir) -> str:
+    """What a user can fall back on after a non-finite update."""
+    if out_dir is None:
+        return "no checkpoint (no output directory); lower the learning rate and train again"
+    info = ckpt.load_meta(out_dir) if dist.is_writer() else None
+    if info is None:
+        return (f"no checkpoint had been written to {out_dir}; lower the learning rate and "
+                f"train again (--overwrite)")
+    return (f"the last good checkpoint ({info['path']}, chunk {info['step']}) is kept in "
+            f"{ckpt.checkpoint_dir(out_dir)}")

@@ -1,6 +1,7 @@
 """Learning-curve plots in the paper's style: average reward vs episodes, one panel per level."""
 from __future__ import annotations
 
+import csv
 import json
 import warnings
 from collections import defaultdict
@@ -15,6 +16,31 @@ def _load(run_dir: Path):
     rows = read_curves(run_dir / "curves.csv")
     meta = json.loads((run_dir / "results.json").read_text()) if (run_dir / "results.json").exists() else {}
     return rows, meta
+
+
+def check_curves(run_dir: Path) -> None:
+    """Refuse, naming the file, a run without a readable curves.csv holding at least one row."""
+    from smjax.train.results import CURVE_COLUMNS, read_curves
+
+    path = Path(run_dir) / "curves.csv"
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} has no curves.csv (is it a run directory?)")
+    try:
+        rows = read_curves(path)
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise ValueError(f"{path} cannot be read ({err})") from None
+    if not rows:
+        raise ValueError(f"{path} has no rows: the run recorded no progress yet")
+    missing = [c for c in CURVE_COLUMNS if c not in rows[0]]
+    if missing:
+        raise ValueError(f"{path} is not a smjax curves file (missing columns {missing})")
+    for i, r in enumerate(rows, start=2):
+        try:
+            int(r["level"]), int(r["seed"]), int(r["episodes"])
+            if r["avg_return"] not in ("", None):
+                float(r["avg_return"])
+        except (TypeError, ValueError):
+            raise ValueError(f"{path} line {i} is malformed: {r}") from None
 
 
 def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
@@ -74,6 +100,8 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
         fig.suptitle(title)
     fig.tight_layout()
     out_path = Path(out_path)
+    if not out_path.suffix:  # matplotlib would append .png silently: say the real name
+        out_path = out_path.with_name(out_path.name + ".png")
     out_path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_path, dpi=110)
     plt.close(fig)

@@ -149,6 +149,6 @@ def world_kind(task: str) -> str:
 
 
 def check_task(task: str) -> str:
-    if task not in TASKS:
+    if not isinstance(task, str) or task not in TASKS:
         raise ValueError(f"unknown craft task {task!r}; valid tasks: {', '.join(TASKS)}")
     return task

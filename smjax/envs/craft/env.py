@@ -12,6 +12,7 @@ import jax.numpy as jnp
 
 from smjax.core import spaces
 from smjax.core.env import Environment, select_tree
+from smjax.core.overrides import INT32_MAX, parse_bool, parse_choice, parse_int
 from smjax.core.registry import register
 from smjax.envs.craft import constants as C
 from smjax.envs.craft import dynamics, observation, templates, worldgen
@@ -128,16 +129,11 @@ def make_craft(
     map_seed: int = 0,
 ) -> tuple[CraftEnv, CraftParams]:
     """Build ``(env, params)`` for a Craft task, validating every override value."""
-    if observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
-    if not isinstance(fixed_map, bool):
-        raise ValueError(f"fixed_map must be True or False, got {fixed_map!r}")
-    if max_steps is not None and (
-        isinstance(max_steps, bool) or not isinstance(max_steps, int) or not 1 <= max_steps < 2**31
-    ):
-        raise ValueError(f"max_steps must be None or an int in [1, 2**31), got {max_steps!r}")
-    if isinstance(map_seed, bool) or not isinstance(map_seed, int) or not 0 <= map_seed < 2**31:
-        raise ValueError(f"map_seed must be an int in [0, 2**31), got {map_seed!r}")
+    observation = parse_choice("observation", observation, OBSERVATIONS)
+    fixed_map = parse_bool("fixed_map", fixed_map)
+    if max_steps is not None:
+        max_steps = parse_int("max_steps", max_steps, 1, INT32_MAX)
+    map_seed = parse_int("map_seed", map_seed, 0, INT32_MAX)
     env = CraftEnv(CraftConfig(task=task, observation=observation))
     fixed_state = env.new_state(jax.random.key(map_seed)) if fixed_map else None
     return env, make_params(task, max_steps=max_steps, fixed_state=fixed_state)

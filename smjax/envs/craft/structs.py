@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from smjax.core.overrides import INT32_MAX, parse_int
 from smjax.envs.craft import constants as C
 
 OBSERVATIONS = ("paper", "compact", "none")
@@ -76,7 +77,8 @@ def make_params(
 ) -> CraftParams:
     """Params for a task; ``fixed_state`` (one unbatched state) turns on the fixed map."""
     goal = C.TASKS[C.check_task(task)]
-    cap = C.STEP_CAP[goal] if max_steps is None else max_steps
+    # strict: 0, -1 or 1.5 would truncate every step; 2**31 would overflow int32
+    cap = C.STEP_CAP[goal] if max_steps is None else parse_int("max_steps", max_steps, 1, INT32_MAX)
     if fixed_state is None:
         grid = jnp.zeros((C.GRID_SIZE, C.GRID_SIZE), jnp.uint8)
         pos, direction = jnp.zeros(2, jnp.int32), jnp.int32(C.DOWN)

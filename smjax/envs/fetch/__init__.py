@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from smjax.core.overrides import INT32_MAX, parse_bool, parse_float, parse_int
 from smjax.core.registry import register
 from smjax.envs.fetch.env import FetchEnv
 from smjax.envs.fetch.model import MAX_BLOCKS, MIN_BLOCKS, PhysicsConfig, check_num_blocks
@@ -36,17 +37,19 @@ def make_fetch(
     max_steps: int | None = None,
 ) -> tuple[FetchEnv, FetchParams]:
     """Build (env, params) for N = ``num_blocks`` (or ``default_blocks``) blocks."""
-    n = check_num_blocks(default_blocks if num_blocks is None else num_blocks)
-    physics = PhysicsConfig(timestep=float(timestep), substeps=int(substeps),
-                            solver_iterations=int(solver_iterations),
-                            ls_iterations=int(ls_iterations))
+    n = check_num_blocks(default_blocks if num_blocks is None else
+                         parse_int("num_blocks", num_blocks, MIN_BLOCKS, MAX_BLOCKS))
+    # strict: a truncated 2.7 substeps or a NaN timestep would silently change the physics
+    physics = PhysicsConfig(timestep=parse_float("timestep", timestep, 0.0, 0.1, low_open=True),
+                            substeps=parse_int("substeps", substeps, 1, 1000),
+                            solver_iterations=parse_int("solver_iterations", solver_iterations, 1, 1000),
+                            ls_iterations=parse_int("ls_iterations", ls_iterations, 1, 1000))
     env = FetchEnv(FetchConfig(num_blocks=n, physics=physics,
-                               obs_include_goals=bool(obs_include_goals)))
+                               obs_include_goals=parse_bool("obs_include_goals", obs_include_goals)))
     params = env.default_params
     if max_steps is not None:
-        if int(max_steps) < 1:
-            raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-        params = params.replace(max_steps=jnp.asarray(int(max_steps), jnp.int32))
+        steps = parse_int("max_steps", max_steps, 1, INT32_MAX)
+        params = params.replace(max_steps=jnp.asarray(steps, jnp.int32))
     return env, params
 
 

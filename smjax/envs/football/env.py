@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.core import spaces
+from smjax.core.overrides import INT32_MAX, parse_bool, parse_choice, parse_float, parse_int
 from smjax.core.env import Environment, select_tree
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import all_actions
@@ -34,18 +35,13 @@ class FootballEnv(Environment[FootballState, FootballParams]):
 
     def __init__(self, observation: str = "simple115", game_length: int = 3000,
                  difficulty: float = 0.6, checkpoint_reward: bool = False):
-        if observation not in OBSERVATION_SIZES:
-            raise ValueError(
-                f"unknown football observation {observation!r}; valid: {sorted(OBSERVATION_SIZES)}")
-        if int(game_length) < 1:
-            raise ValueError(f"game_length must be >= 1, got {game_length}")
-        if not 0.0 <= float(difficulty) <= 1.0:
-            raise ValueError(f"difficulty must lie in [0, 1] (easy 0.05, medium 0.6, hard 0.95), "
-                             f"got {difficulty}")
-        self.observation = observation
-        self.game_length = int(game_length)
-        self._difficulty = float(difficulty)
-        self._checkpoint_reward = bool(checkpoint_reward)
+        self.observation = parse_choice("football observation", observation,
+                                        sorted(OBSERVATION_SIZES))
+        # strict: bool("False") is True and int(2.9) is 2; both would pass silently
+        self.game_length = parse_int("game_length", game_length, 1, INT32_MAX)
+        self._difficulty = parse_float("difficulty (easy 0.05, medium 0.6, hard 0.95)",
+                                       difficulty, 0.0, 1.0)
+        self._checkpoint_reward = parse_bool("checkpoint_reward", checkpoint_reward)
 
     @property
     def default_params(self) -> FootballParams:

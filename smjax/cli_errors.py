@@ -1,0 +1,50 @@
+"""Which exceptions are a user's mistake, and the one line the CLI prints for each.
+
+A user error (a bad flag, config, path, checkpoint, resume mismatch, a non-finite run, a
+batch that does not fit) exits with code 2 and one or two lines naming the file, field
+or value; ``--debug`` re-raises it so the traceback shows. Anything else is a bug: one
+line, exit code 1, and the hint to rerun with ``--debug``.
+"""
+from __future__ import annotations
+
+import errno
+
+USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, KeyError, TypeError,
+                                                FileNotFoundError, FileExistsError,
+                                                IsADirectoryError, NotADirectoryError,
+                                                PermissionError, FloatingPointError)
+
+
+class UsageError(ValueError):
+    """A flag or flag combination the CLI refuses; the message says what to do."""
+
+
+def _first_line(text: str) -> str:
+    lines = [line for line in text.strip().splitlines() if line.strip()]
+    return lines[0] if lines else ""
+
+
+def is_out_of_memory(err: BaseException) -> bool:
+    return "RESOURCE_EXHAUSTED" in str(err) or isinstance(err, MemoryError)
+
+
+def user_message(err: BaseException, batch: str | None = None) -> str | None:
+    """The one line for a user error, else None (a bug)."""
+    from smjax.train.checkpoint import CheckpointError
+
+    if is_out_of_memory(err):
+        what = f" with {batch}" if batch else ""
+        return (f"out of memory{what} ({_first_line(str(err))[:200]}); lower --num-envs or "
+                f"--seeds")
+    if isinstance(err, OSError) and err.errno == errno.ENOSPC:
+        return f"disk full writing {err.filename or 'output'}; free space and --resume the run"
+    if isinstance(err, CheckpointError):
+        return _first_line(str(err))
+    if isinstance(err, KeyError) and err.args:
+        return str(err.args[0])  # str(KeyError) would quote the message
+    if isinstance(err, USER_ERRORS):
+        text = _first_line(str(err)) or type(err).__name__
+        if isinstance(err, OSError) and err.filename and str(err.filename) not in text:
+            text = f"{err.filename}: {text}"
+        return text
+    return None

@@ -1,0 +1,182 @@
+"""``smjax train``: flags -> (task, config, seeds, out) -> ``smjax.train.run.run``.
+
+Every check that can fail on a user's input runs here or in ``run`` before anything
+compiles; ``smjax.cli.main`` turns the errors into one line and exit code 2.
+"""
+from __future__ import annotations
+
+import json
+import socket
+import sys
+import time
+from pathlib import Path
+
+from smjax.cli_errors import UsageError
+
+
+def parse_value(text: str):
+    """``--set/--agent/--env`` values: JSON where it parses (numbers, lists, true), else text
+    (each field's parser then reads words such as ``no`` strictly)."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def key_values(items, what: str) -> dict:
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise UsageError(f"{what} must look like KEY=VALUE, got {item!r}")
+        k, v = item.split("=", 1)
+        if not k.strip():
+            raise UsageError(f"{what} needs a name before '=', got {item!r}")
+        out[k.strip()] = parse_value(v)
+    return out
+
+
+def add_distributed(p) -> None:
+    g = p.add_argument_group(
+        "several processes / hosts (jax.distributed)",
+        "Start the same command once per process; all of them train together. Unset values "
+        "come from JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID. Only process 0 "
+        "writes (results, checkpoints, plots) and prints; --out is on process 0's disk.")
+    g.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                   help="address of process 0 (reachable from every process)")
+    g.add_argument("--coordinator-timeout", type=float, default=60.0, metavar="SECONDS",
+                   help="give up joining the run after this long (default 60)")
+    g.add_argument("--num-processes", type=int, default=None, metavar="N", help="processes in the run")
+    g.add_argument("--process-id", type=int, default=None, metavar="I", help="this process, 0..N-1")
+    g.add_argument("--local-device-ids", default=None, metavar="IDS",
+                   help="comma-separated local device ids this process uses (e.g. one GPU each: 0 / 1)")
+    g.add_argument("--cluster", nargs="?", const=True, default=False, metavar="METHOD",
+                   help="let JAX detect unset values from the cluster (SLURM, Open MPI, ...); "
+                        "optionally name the method, e.g. mpi4py")
+
+
+def _probe_coordinator(address: str, process_id: int | None, timeout: float) -> None:
+    """Fail in bounded time, in one line, where JAX would wait silently and then abort
+    with a C++ stack trace: an unresolvable host, or (for processes other than 0, which
+    connect to it) a coordinator that does not answer within ``timeout`` seconds."""
+    host, port = address.rsplit(":", 1)
+    try:
+        socket.getaddrinfo(host.strip("[]"), int(port))
+    except OSError as err:
+        raise UsageError(f"--coordinator {address}: host {host!r} cannot be resolved ({err}); "
+                         f"check the address") from None
+    if not process_id:
+        return  # process 0 hosts the coordinator
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with socket.create_connection((host.strip("[]"), int(port)), timeout=2):
+                return
+        except OSError:
+            if time.monotonic() >= deadline:
+                raise UsageError(f"--coordinator {address} did not answer within {timeout:g} s; "
+                                 f"start process 0 first, check the address, or raise "
+                                 f"--coordinator-timeout") from None
+            time.sleep(0.5)
+
+
+def initialize_distributed(args) -> None:
+    """Join the multi-process run the flags / environment describe (nothing for one process)."""
+    from smjax.train.distributed import initialize, resolve
+
+    if not args.coordinator_timeout > 0:
+        raise UsageError(f"--coordinator-timeout must be > 0 seconds, got {args.coordinator_timeout}")
+    ids = None
+    if args.local_device_ids:
+        try:
+            ids = [int(x) for x in args.local_device_ids.split(",")]
+        except ValueError:
+            raise UsageError(f"--local-device-ids must be comma-separated integers, "
+                             f"got {args.local_device_ids!r}") from None
+    coordinator, num, pid = resolve(args.coordinator, args.num_processes, args.process_id)
+    if coordinator is not None and (num or 0) > 1:
+        _probe_coordinator(coordinator, pid, args.coordinator_timeout)
+    initialize(args.coordinator, args.num_processes, args.process_id, local_device_ids=ids,
+               auto_detect=args.cluster, initialization_timeout=max(1, int(args.coordinator_timeout)))
+
+
+def _saved_run(args) -> dict | None:
+    """The checkpointed run ``--resume`` names (its config is the base), checked."""
+    from smjax.train import checkpoint as ckpt
+
+    if not args.resume:
+        return None
+    if args.overwrite:
+        raise UsageError("--resume and --overwrite contradict each other; pass one of them")
+    if args.out and Path(args.out).resolve() != Path(args.resume).resolve():
+        raise UsageError(f"--out {args.out} with --resume {args.resume}: a resumed run continues "
+                         f"in its own directory; drop --out")
+    info = ckpt.shared_meta(args.resume)
+    if info is None:
+        raise UsageError(f"nothing to resume: no checkpoint in {args.resume} (train with --out "
+                         f"{args.resume} first)")
+    saved = info["meta"]["run"]
+    if saved.get("task") != args.task:
+        raise UsageError(f"{args.resume} is a run of {saved.get('task')!r}, not {args.task!r}")
+    return saved
+
+
+def build_config(args, saved: dict | None):
+    from smjax.train.config import TrainConfig, read_config_file
+
+    names = set(TrainConfig.__dataclass_fields__)
+    data = {k: v for k, v in saved.items() if k in names} if saved else {}
+    if args.config:
+        data.update(read_config_file(args.config))  # only the fields the file sets
+    data.update(key_values(args.set, "--set"))
+    for field, value in (("method", args.method), ("algo", args.algo), ("hierarchy", args.hierarchy),
+                         ("num_envs", args.num_envs), ("threshold", args.threshold),
+                         ("max_episodes_per_level", args.max_episodes),
+                         ("max_steps_per_level", args.max_steps)):
+        if value is not None:
+            data[field] = value
+    if args.tensorboard:
+        data["tensorboard"] = True
+    if args.agent:
+        agent = key_values(args.agent, "--agent")
+        if "gamma" in agent:
+            raise UsageError(f"--agent gamma={agent['gamma']} would be ignored: the discount is a "
+                             f"training setting; use --set gamma={agent['gamma']}")
+        data["agent"] = dict(data.get("agent", {})) | agent
+    return TrainConfig.from_dict(data)
+
+
+def choose_seeds(args, saved: dict | None) -> list[int]:
+    if args.seeds is not None and args.seeds < 1:
+        raise UsageError(f"--seeds must be >= 1, got {args.seeds}")
+    if args.seed_offset < 0:
+        raise UsageError(f"--seed-offset must be >= 0, got {args.seed_offset}")
+    if saved and args.seeds is None and args.seed_offset == 0:
+        return list(saved["seeds"])
+    # with --resume, explicit seeds are compared with the checkpoint's (never ignored)
+    return list(range(args.seed_offset, args.seed_offset + (args.seeds or 1)))
+
+
+def cmd_train(args) -> int:
+    from smjax.train.distributed import is_writer
+    from smjax.train.run import run
+
+    initialize_distributed(args)  # before anything touches JAX
+    saved = _saved_run(args)
+    cfg = build_config(args, saved)
+    env_over = dict(saved["env_overrides"]) if saved else {}
+    env_over.update(key_values(args.env, "--env"))
+    if args.fixed_map:
+        env_over["fixed_map"] = True
+    seeds = choose_seeds(args, saved)
+    out = args.resume or args.out or f"runs/{args.task.replace('/', '_')}_{cfg.method}"
+    args._batch = f"{len(seeds)} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
+    results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
+                  resume=bool(args.resume), overwrite=args.overwrite)
+    if not is_writer():  # process 0 reports for the whole run
+        return 0
+    summary = {k: results[k] for k in ("env", "task", "method", "algo", "episodes_to_threshold",
+                                       "final_success", "wall_seconds", "compile_seconds")}
+    print(json.dumps(summary))
+    print(f"wrote {Path(out) / 'results.json'}, curves.csv, curves.png")
+    sys.stdout.flush()
+    return 0

@@ -1,0 +1,194 @@
+"""The output directory of a run: validated before anything compiles, locked while it runs.
+
+``prepare_out_dir`` checks that ``--out`` can hold a run (not a file, creatable,
+writable) and takes an advisory lock on it (``.smjax.lock`` with the owner's pid, host
+and start time). The lock is an ``flock`` on that file, so the kernel releases it when
+the owner exits in any way (SIGKILL included); a lock file whose lock is free is
+therefore stale, and it is named when a new run takes it over. A directory that already
+holds a run's files (results, curves, checkpoints) is refused unless the caller resumes
+it or asks to overwrite it, so nothing is replaced without a word.
+"""
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import os
+import shutil
+import socket
+import sys
+import time
+from pathlib import Path
+
+LOCK_NAME = ".smjax.lock"
+# what a run writes into its directory; --overwrite deletes exactly these
+RUN_FILES = ("results.json", "curves.csv", "curves.png", "checkpoints", "tensorboard")
+
+
+class OutDirError(ValueError):
+    """The output directory cannot be used; the message names it and says what to do."""
+
+
+class RunExistsError(OutDirError, FileExistsError):
+    """The directory holds a run that is neither resumed nor to be overwritten."""
+
+
+class NothingToResumeError(OutDirError, FileNotFoundError):
+    """``--resume`` of a directory that does not exist."""
+
+
+def check_out_dir(out: Path) -> None:
+    """Refuse a path that can never hold a run: a file, uncreatable, not writable."""
+    if out.exists() and not out.is_dir():
+        raise OutDirError(f"--out {out} is a file, not a directory; choose a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutDirError(f"--out {out} cannot be created ({err.strerror or err}); choose a "
+                          f"writable location") from None
+    probe = out / f".smjax-write-probe-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as err:
+        raise OutDirError(f"--out {out} is not writable ({err.strerror or err}); fix its "
+                          f"permissions or choose another directory") from None
+
+
+def _holds_checkpoint(folder: Path) -> bool:
+    """A checkpoints folder with anything resumable: latest.json or a complete step (an
+    orbax temporary of a save killed before the first checkpoint holds nothing)."""
+    return any(c.name == "latest.json" or (c.name.startswith("step-")
+                                           and ".orbax-checkpoint-tmp" not in c.name)
+               for c in folder.iterdir())
+
+
+def existing_run_files(out: Path) -> list[str]:
+    """The run files ``out`` holds (a checkpoints folder only when it holds a checkpoint)."""
+    found = []
+    for name in RUN_FILES:
+        p = out / name
+        if name == "checkpoints" and p.is_dir():
+            if _holds_checkpoint(p):
+                found.append(name)
+        elif p.is_file() or (p.is_dir() and any(p.iterdir())):
+            found.append(name)
+    return found
+
+
+def clear_run_files(out: Path) -> None:
+    """``--overwrite``: remove the previous run's files (nothing else in the directory)."""
+    for name in RUN_FILES:
+        p = out / name
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
+
+
+class DirLock:
+    """An advisory, kernel-released lock on ``out`` for the life of a run."""
+
+    def __init__(self, out: Path):
+        self.path = Path(out) / LOCK_NAME
+        self.fd: int | None = None
+        self.stale_owner: dict | None = None  # the owner of a stale lock taken over
+
+    def acquire(self) -> "DirLock":
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as err:
+                os.close(fd)
+                if err.errno in (errno.EAGAIN, errno.EACCES):
+                    raise OutDirError(self._held_message()) from None
+                raise
+            # the file may have been unlinked by its releasing owner between open and flock
+            if _same_file(fd, self.path):
+                break
+            os.close(fd)
+        self.stale_owner = _read_owner(fd)
+        _write_owner(fd)
+        self.fd = fd
+        return self
+
+    def release(self) -> None:
+        if self.fd is None:
+            return
+        try:
+            self.path.unlink(missing_ok=True)  # unlink first: a waiter then re-opens anew
+        finally:
+            os.close(self.fd)
+            self.fd = None
+
+    def _held_message(self) -> str:
+        try:
+            owner = json.loads(self.path.read_text())
+            who = f"pid {owner.get('pid')} on host {owner.get('host')}, started {owner.get('started')}"
+        except (OSError, ValueError, AttributeError):
+            who = "another process"
+        return (f"--out {self.path.parent} is in use by a running smjax run ({who}); wait for it "
+                f"to finish or choose another directory")
+
+    def __enter__(self) -> "DirLock":
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        return os.fstat(fd).st_ino == os.stat(path).st_ino
+    except FileNotFoundError:
+        return False
+
+
+def _read_owner(fd: int) -> dict | None:
+    try:
+        data = os.pread(fd, 4096, 0)
+        return json.loads(data) if data.strip() else None
+    except (OSError, ValueError):
+        return {"pid": "?", "host": "?"}
+
+
+def _write_owner(fd: int) -> None:
+    owner = {"pid": os.getpid(), "host": socket.gethostname(),
+             "started": time.strftime("%Y-%m-%dT%H:%M:%S")}
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, json.dumps(owner).encode(), 0)
+    os.fsync(fd)
+
+
+def prepare_out_dir(out: str | Path, *, resume: bool, overwrite: bool) -> DirLock:
+    """Validate ``out``, lock it and, with ``overwrite``, clear the previous run's files.
+
+    Returns the held lock (release it when the run ends). Raises ``OutDirError`` when
+    the directory is unusable, locked by a live run, or holds a run that is neither
+    resumed nor to be overwritten.
+    """
+    out = Path(out)
+    if resume and overwrite:
+        raise OutDirError("--resume and --overwrite contradict each other; pass one of them")
+    if resume and not out.is_dir():
+        raise NothingToResumeError(f"nothing to resume: {out} is not a directory (train with "
+                                   f"--out {out} first)")
+    check_out_dir(out)
+    lock = DirLock(out).acquire()
+    try:
+        if lock.stale_owner:
+            o = lock.stale_owner
+            print(f"note: took over the stale lock of {out} (pid {o.get('pid')} on host "
+                  f"{o.get('host')} is gone)", file=sys.stderr)
+        found = existing_run_files(out)
+        if found and not resume:
+            if not overwrite:
+                raise RunExistsError(
+                    f"{out} already holds a run ({', '.join(found)}); pass --resume to continue "
+                    f"it, --overwrite to replace it, or choose another output directory")
+            clear_run_files(out)
+    except BaseException:
+        lock.release()
+        raise
+    return lock
