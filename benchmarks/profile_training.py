@@ -79,7 +79,7 @@ def build(args):
     keys = jax.vmap(jax.random.PRNGKey)(jnp.arange(S, dtype=jnp.uint32))
     split = jax.vmap(lambda k: jax.random.split(k, 3))(keys)
     learner = engine.init_learner(split[:, 0])
-    start = jnp.asarray(plan.start)
+    start = jnp.full((S,), plan.start, jnp.int32)
     state = SeedState(engine.reset(split[:, 1], start), learner, split[:, 2])
     bank = engine.new_bank(learner)
     learned = jnp.zeros((S, h.num_options), bool)
@@ -97,6 +97,7 @@ def profile(args) -> dict:
     S, B, T, U = args.seeds, cfg.num_envs, cfg.rollout_ticks, cfg.updates_per_chunk
     steps = S * B * T * U
     learner_id, start = jnp.asarray(plan.option), jnp.asarray(plan.start)
+    learners, starts = jnp.full((S,), plan.option, jnp.int32), jnp.full((S,), plan.start, jnp.int32)
     active = jnp.ones((S,), bool)
     out: dict = {"task": args.task, "env": args.env, "algo": cfg.algo, "level": args.level,
                  "option": plan.name, "seeds": S, "num_envs": B, "rollout_ticks": T,
@@ -111,8 +112,8 @@ def profile(args) -> dict:
               f"{n / run_s:12,.0f} env steps/s", flush=True)
 
     # the whole chunk, as the trainer calls it (no donation here, so it can repeat)
-    chunk = jax.vmap(engine._chunk, in_axes=(0, 0, 0, 0, None, None))
-    record("chunk", lambda st: chunk(st, active, bank, learned, learner_id, start)[1], (state,))
+    chunk = jax.vmap(engine._chunk)
+    record("chunk", lambda st: chunk(st, active, bank, learned, learners, starts)[1], (state,))
 
     def rollout_one(st: SeedState, bank_s, learned_s):
         controls = Controls(learner_id, start, learned_s)
@@ -230,8 +231,9 @@ def time_gate(engine, keys, state, bank, learned, learner_id, start, active):
         compile_s = time.perf_counter() - t0
         call = lambda: compiled(*args)  # noqa: E731
     else:
-        gate_args = (keys, state, bank, learned, int(learner_id), int(start), active,
-                     engine.cfg.threshold)
+        S = keys.shape[0]
+        gate_args = (keys, state, bank, learned, [int(learner_id)] * S, [int(start)] * S,
+                     [True] * S, [engine.cfg.threshold] * S)
         compile_s = engine.gate(*gate_args)[1]
         call = lambda: engine.gate(*gate_args)[0]  # noqa: E731
     jax.block_until_ready(call())

@@ -83,7 +83,7 @@ def _engine(threshold_cfg: TrainConfig) -> tuple[Engine, SeedState]:
     engine = Engine(env, params, h, make_agent("ppo", hidden_sizes=(16,)), threshold_cfg)
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
     learner = engine.init_learner(keys)
-    state = SeedState(engine.reset(keys, jnp.asarray(0)), learner, keys)
+    state = SeedState(engine.reset(keys, jnp.zeros((3,), jnp.int32)), learner, keys)
     return engine, state
 
 
@@ -93,14 +93,14 @@ def test_gate_stops_early_with_the_same_decision():
     bank = engine.new_bank(state.learner)
     learned = jnp.zeros((3, engine.h.num_options), bool)
     keys = jax.random.split(jax.random.PRNGKey(5), 3)
-    due = jnp.ones((3,), bool)
+    due = [True] * 3
     for threshold in (0.05, 0.3, 0.6, 0.95):
         # the key-door return is 1 for an opened door, else 0: a success in [0, 1]
         engine.env.success_in_unit_interval = True
-        early, _ = engine.gate(keys, state, bank, learned, 0, 0, due, threshold)
+        early, _ = engine.gate(keys, state, bank, learned, [0] * 3, [0] * 3, due, [threshold] * 3)
         # the same episodes without stopping early (as for an unbounded success range)
         engine.env.success_in_unit_interval = False
-        full, _ = engine.gate(keys, state, bank, learned, 0, 0, due, threshold)
+        full, _ = engine.gate(keys, state, bank, learned, [0] * 3, [0] * 3, due, [threshold] * 3)
         np.testing.assert_array_equal(np.asarray(early["success"]) >= threshold,
                                       np.asarray(full["success"]) >= threshold)
         assert (np.asarray(early["env_steps"]) <= np.asarray(full["env_steps"])).all()
@@ -112,7 +112,7 @@ def test_evaluation_and_gate_share_one_compiled_program():
     bank = engine.new_bank(state.learner)
     learned = jnp.zeros((3, engine.h.num_options), bool).at[:, 0].set(True)
     keys = jax.random.split(jax.random.PRNGKey(5), 3)
-    _, first = engine.gate(keys, state, bank, learned, 1, 0, jnp.ones((3,), bool), 0.8)
+    _, first = engine.gate(keys, state, bank, learned, [1] * 3, [0] * 3, [True] * 3, [0.8] * 3)
     result, second = engine.evaluate(keys, bank, learned, state.learner)
     assert first > 0 and second == 0.0 and len(engine._compiled_episodes) == 1
     assert np.asarray(result["completed"]).shape == (3,)

@@ -42,13 +42,13 @@ def time_engine_chunk(env, params, hierarchy, cfg, learner_name: str, learned_na
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
     split = jax.vmap(lambda k: jax.random.split(k, 3))(keys)
     learner = engine.init_learner(split[:, 0])
-    start = jnp.asarray(0)  # top-down: every episode starts at the root
+    start = jnp.zeros((num_seeds,), jnp.int32)  # top-down: every episode starts at the root
     state = SeedState(engine.reset(split[:, 1], start), learner, split[:, 2])
     bank = engine.new_bank(learner)
     learned = jnp.zeros((num_seeds, hierarchy.num_options), bool)
     for name in learned_names:
         learned = learned.at[:, hierarchy.option_index(name)].set(True)
-    learner_id = jnp.asarray(hierarchy.option_index(learner_name))
+    learner_id = jnp.full((num_seeds,), hierarchy.option_index(learner_name), jnp.int32)
     active = jnp.ones((num_seeds,), bool)
     t0 = time.perf_counter()
     compiled = engine.chunk.lower(state, active, bank, learned, learner_id, start).compile()

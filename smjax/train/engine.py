@@ -25,16 +25,21 @@ def _same(x):
     return x
 
 
-def _decide(threshold: float | None) -> tuple:
-    """The episodes program's early-decision inputs (see ``Engine._first_episodes``) for a
-    gate at ``threshold`` (None: run every episode to its end). The float32 bounds are
-    rounded outwards, so a stop agrees with the trainer's float64 comparison."""
-    if threshold is None:
-        return jnp.asarray(False), jnp.asarray(np.inf, jnp.float32), jnp.asarray(-np.inf, jnp.float32)
-    t = np.float32(threshold)
-    up = t if float(t) >= threshold else np.nextafter(t, np.float32(np.inf))
-    down = t if float(t) <= threshold else np.nextafter(t, np.float32(-np.inf))
-    return jnp.asarray(True), jnp.asarray(up), jnp.asarray(down)
+def _decide(thresholds: list) -> tuple:
+    """Per seed, the episodes program's early-decision inputs (see
+    ``Engine._first_episodes``) for a gate at that threshold (None: run every episode to
+    its end). The float32 bounds are rounded outwards, so a stop agrees with the
+    trainer's float64 comparison."""
+    on, up, down = [], [], []
+    for threshold in thresholds:
+        if threshold is None:
+            on.append(False), up.append(np.inf), down.append(-np.inf)
+            continue
+        t = np.float32(threshold)
+        on.append(True)
+        up.append(t if float(t) >= threshold else np.nextafter(t, np.float32(np.inf)))
+        down.append(t if float(t) <= threshold else np.nextafter(t, np.float32(-np.inf)))
+    return (jnp.asarray(on, bool), jnp.asarray(up, jnp.float32), jnp.asarray(down, jnp.float32))
 
 
 class SeedState(NamedTuple):
@@ -70,15 +75,15 @@ class Engine:
         obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
         self.example_obs = obs
         self.num_actions = hierarchy.num_actions
-        self.chunk = jax.jit(jax.vmap(self._chunk, in_axes=(0, 0, 0, 0, None, None)),
-                             donate_argnums=(0,))
+        # every argument has a seed axis: each seed trains its own level
+        self.chunk = jax.jit(jax.vmap(self._chunk), donate_argnums=(0,))
         self.episodes = jax.jit(
             jax.vmap(self._first_episodes,
-                     in_axes=(0, 0, 0, 0, None, None, None, None, 0, None, None)),
+                     in_axes=(0, 0, 0, 0, 0, 0, None, None, 0, 0, None)),
             static_argnums=(10,))
         self._compiled_episodes: dict[tuple, Any] = {}
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
-        self.reset = jax.jit(jax.vmap(self._reset, in_axes=(0, None)))
+        self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
 
     # ---- state -----------------------------------------------------------------
     def init_learner(self, keys: jax.Array):
@@ -195,21 +200,26 @@ class Engine:
         """The trained hierarchy alone (root on the stack, no teleports, nobody learning),
         ``eval_envs`` episodes per seed. ``place`` puts the small per-call inputs where the
         caller's mesh needs them (every input must be global across processes)."""
-        scalars = place((jnp.asarray(NO_OPTION), jnp.asarray(0), jnp.asarray(False),
-                         jnp.asarray(self.cfg.eval_max_ticks)))
-        skip = place(jnp.zeros((keys.shape[0],), bool))
-        args = (keys, learner_state, bank, learned) + scalars + (skip, place(_decide(None)))
+        S = keys.shape[0]
+        per_seed = place((jnp.full((S,), NO_OPTION, jnp.int32), jnp.zeros((S,), jnp.int32),
+                          jnp.zeros((S,), bool), _decide([None] * S)))
+        flags = place((jnp.asarray(False), jnp.asarray(self.cfg.eval_max_ticks)))
+        learner, start, skip, decide = per_seed
+        args = (keys, learner_state, bank, learned, learner, start) + flags + (skip, decide)
         return self._run_episodes(args, self.cfg.eval_envs)
 
-    def gate(self, keys, state: SeedState, bank, learned, learner: int, start, due,
-             threshold: float, place=_same) -> tuple[dict, float]:
-        """The learner's option as it will be frozen, called where the levels above call it
+    def gate(self, keys, state: SeedState, bank, learned, learners: list[int],
+             starts: list[int], due: list[bool], thresholds: list[float],
+             place=_same) -> tuple[dict, float]:
+        """Each seed's learner as it will be frozen, called where the levels above call it
         (``keys``: per seed, varied between attempts by the caller; a seed not ``due`` is
-        skipped); it stops once passing ``threshold`` or not is certain."""
+        skipped); a seed's episodes stop once passing its threshold or not is certain."""
         # a template's success is its F_o (0 or 1); the root's is the task's
-        bounded = learner != 0 or self.env.success_in_unit_interval
-        decide = _decide(threshold if bounded else None)
-        scalars = place((jnp.asarray(learner), jnp.asarray(start), jnp.asarray(True),
-                         jnp.asarray(self.cfg.gate_max_ticks)))
-        args = (keys, state.learner, bank, learned) + scalars + (~due, place(decide))
+        bounded = [o != 0 or self.env.success_in_unit_interval for o in learners]
+        decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
+        per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
+                          ~jnp.asarray(due, bool), decide))
+        flags = place((jnp.asarray(True), jnp.asarray(self.cfg.gate_max_ticks)))
+        learner, start, skip, decide = per_seed
+        args = (keys, state.learner, bank, learned, learner, start) + flags + (skip, decide)
         return self._run_episodes(args, self.cfg.gate_envs)

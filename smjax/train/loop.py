@@ -3,10 +3,13 @@
 It runs compiled chunks (``Engine.chunk``) and, between them, counts episodes, checks
 each seed's running success against the threshold, draws progress, records curves and
 writes checkpoints; it never steps an environment itself. All seeds train together in
-one compiled program; a seed that has finished a level is frozen (its updates are
-masked) until every seed has finished it. Everything the loop knows lives in
-``arrays`` (device state) and ``host`` (JSON-able counters), which is exactly what a
-checkpoint holds, so a resumed run continues bit for bit.
+one compiled program, each at its own level: the option being trained and the option
+episodes start from are per-seed traced values, so a seed that finishes a level starts
+the next one in the next chunk instead of waiting for the slowest seed (only a seed that
+has finished every level is masked). A seed's numbers do not depend on the other seeds.
+Everything the loop knows lives in ``arrays`` (device state) and ``host`` (JSON-able
+counters), which is exactly what a checkpoint holds, so a resumed run continues bit for
+bit.
 """
 from __future__ import annotations
 
@@ -25,6 +28,7 @@ from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
 from smjax.train.config import TrainConfig
 from smjax.train.engine import Engine, SeedState
+from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
 
 
@@ -79,10 +83,18 @@ def running_success(history: list, window: int) -> float:
     return total / count if count >= window else float("nan")
 
 
-def _gate_counters(num_seeds: int) -> dict:
-    """A level's gate bookkeeping per seed (host state, checkpointed)."""
-    return {"gate_success": [None] * num_seeds, "gate_attempts": [0] * num_seeds,
-            "gate_env_steps": [0] * num_seeds, "gate_next": [0] * num_seeds}
+# a seed's bookkeeping for the level it is in (host state, checkpointed), and its start values
+LEVEL_COUNTERS = {"episodes": 0, "env_steps": 0, "history": None, "running": None,
+                  "gate_success": None, "gate_attempts": 0, "gate_env_steps": 0, "gate_next": 0}
+
+
+def _level_record(plan: LevelPlan, num_seeds: int) -> dict:
+    """A level's entry of results.json; each seed's values are filled when it finishes."""
+    return {"template": plan.name, "level": plan.level,
+            **{k: [None] * num_seeds for k in (
+                "episodes", "env_steps", "reached", "final_running_success",
+                # the last gate attempt's success (None: never tried), attempts, env steps
+                "gate_success", "gate_attempts", "gate_env_steps")}}
 
 
 def _split_seeds(keys: jax.Array, n: int) -> list[jax.Array]:
@@ -114,7 +126,7 @@ def _local(x: jax.Array) -> jax.Array:
 
 
 class HierarchyTrainer:
-    """Trains every planned level for all seeds; resumable from its checkpoints."""
+    """Trains every planned level for all seeds, each seed at its own pace; resumable."""
 
     def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
                  out_dir=None, progress: bool = True, run_meta: dict | None = None):
@@ -131,14 +143,18 @@ class HierarchyTrainer:
         learner = engine.init_learner(k_init)
         self.arrays = {
             "keys": keys,
-            "state": SeedState(engine.reset(k_reset, jnp.asarray(0)), learner, keys),
+            "state": SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
             "bank": engine.new_bank(learner),
             "learned": jnp.zeros((S, engine.h.num_options), bool),
         }
         self.host: dict[str, Any] = {
-            "plan_index": 0, "in_level": False, "levels": [], "curves": [],
+            "stage": [0] * S,  # index of the plan each seed trains (len(plans): done)
+            "started": [False] * S,  # the seed's current level has been set up
+            "levels": [_level_record(p, S) for p in plans], "curves": [],
             "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": 0,
+            "reached": [False] * S, **{k: [v] * S for k, v in LEVEL_COUNTERS.items()},
         }
+        self.host["history"] = [[] for _ in range(S)]
         self._compiled = None
         self._last_save = time.perf_counter()
         self.mesh = training_mesh(S, self.cfg.num_envs)
@@ -165,7 +181,7 @@ class HierarchyTrainer:
     def _place_small(self, tree):
         """Small per-call inputs (flags, masks) on the mesh: with several processes every
         input of a compiled program must be a global array."""
-        if self.mesh is None or not dist.is_multiprocess():
+        if self.mesh is None:
             return tree
         return dist.place(tree, seed_sharding(self.mesh, tree))
 
@@ -185,6 +201,10 @@ class HierarchyTrainer:
         info = ckpt.shared_meta(self.out_dir) if self.out_dir is not None else None
         if info is None:
             return False
+        if "stage" not in info["meta"]["host"]:
+            raise ckpt.CheckpointError(
+                f"the checkpoint in {ckpt.checkpoint_dir(self.out_dir)} was written by an older "
+                f"smjax whose seeds trained levels in lockstep; it cannot be resumed by this one")
         if dist.is_multiprocess():
             like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), self.arrays)
             loaded = ckpt.load_arrays(self.out_dir, like) if self.writer else like
@@ -192,27 +212,77 @@ class HierarchyTrainer:
         else:
             self.arrays = ckpt.load_arrays(self.out_dir, self.arrays)
         self.host = info["meta"]["host"]
-        for k, v in _gate_counters(len(self.seeds)).items():
-            self.host.setdefault(k, v)  # checkpoints written before the gate existed
         self._place()
         return True
 
     # ---- the loop ------------------------------------------------------------------
     def run(self) -> dict:
         t_start = time.perf_counter() - self.host["wall_seconds"]
-        while self.host["plan_index"] < len(self.plans):
-            plan = self.plans[self.host["plan_index"]]
-            if not self.host["in_level"]:
-                self._start_level(plan)
-            self._train_level(plan, t_start)
-            self._finish_level(plan)
-            if self.host["plan_index"] < len(self.plans):
-                # start the next level before checkpointing: the checkpoint then holds its fresh
-                # learner (an empty replay buffer, which compresses to nothing), not the finished
-                # one, so a level-boundary checkpoint is small enough to move between machines
-                self._start_level(self.plans[self.host["plan_index"]])
+        self._start_levels([s for s, done in enumerate(self.host["started"]) if not done
+                            and self.host["stage"][s] < len(self.plans)])
+        bar = Progress(self) if self.progress else None
+        while self._training():
+            t0 = time.perf_counter()
+            stats = self._chunk()
+            dt = time.perf_counter() - t0
+            candidates = self._account(stats)
+            self.host["chunks"] += 1
+            passed = self._accept(candidates)
+            ended = [s for s in self._training()
+                     if s in passed or self._budget_spent(self._level_cfg(s), s)]
+            for s in passed:
+                self.host["reached"][s] = True
             self.host["wall_seconds"] = time.perf_counter() - t_start
-            self.save()
+            if ended:
+                self._finish_levels(ended)
+                # start the next levels before checkpointing: the checkpoint then holds their
+                # fresh learners (an empty replay buffer compresses to nothing), not the
+                # finished ones
+                self._start_levels([s for s in ended if self.host["stage"][s] < len(self.plans)])
+            if bar is not None:
+                bar.draw(dt)
+            if self.out_dir is not None and (ended or self._save_due()):
+                self.save()
+        if bar is not None:
+            bar.close()
+        return self._evaluate(t_start)
+
+    def _training(self) -> list[int]:
+        """Seeds that still have a level to train."""
+        return [s for s, i in enumerate(self.host["stage"]) if i < len(self.plans)]
+
+    def _plan(self, s: int) -> LevelPlan:
+        return self.plans[min(self.host["stage"][s], len(self.plans) - 1)]
+
+    def _level_cfg(self, s: int) -> TrainConfig:
+        return self.cfg.for_level(self._plan(s).name)
+
+    def _per_seed(self, values, dtype) -> jax.Array:
+        return self._place_small(jnp.asarray(values, dtype))
+
+    def _chunk(self):
+        """One compiled chunk for every seed at its own level; returns its stats [S, U]."""
+        host = self.host
+        active = self._per_seed([i < len(self.plans) for i in host["stage"]], bool)
+        learner = self._per_seed([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
+        start = self._per_seed([self._plan(s).start for s in range(len(self.seeds))], jnp.int32)
+        args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
+                learner, start)
+        if self._compiled is None:  # one compile serves every level (ids are traced)
+            t0 = time.perf_counter()
+            self._compiled = self.engine.chunk.lower(*args).compile()
+            host["compile_seconds"] += time.perf_counter() - t0
+        state, stats, _ = self._compiled(*args)
+        stats = dist.gather(stats)  # [S, U], the same on every process
+        if not _all_finite(state.learner.params):
+            where = ", ".join(f"seed {self.seeds[s]} level {self._plan(s).level} "
+                              f"({self._plan(s).name})" for s in self._training())
+            raise NonFiniteError(f"non-finite learner parameters in chunk {host['chunks']} "
+                                 f"(training: {where})")
+        self.arrays["state"] = state
+        return stats
+
+    def _evaluate(self, t_start: float) -> dict:
         keys, k_eval = _split_seeds(_local(self.arrays["keys"]), 2)
         if self.mesh is not None:
             k_eval = dist.place(k_eval, seed_sharding(self.mesh, k_eval))
@@ -229,78 +299,40 @@ class HierarchyTrainer:
                 "wall_seconds": self.host["wall_seconds"],
                 "compile_seconds": self.host["compile_seconds"]}
 
-    def _start_level(self, plan: LevelPlan) -> None:
-        S = len(self.seeds)
-        keys, k_init, k_reset, k_run = _split_seeds(_local(self.arrays["keys"]), 4)
-        learner = self.engine.init_learner(k_init)
-        carry = self.engine.reset(k_reset, jnp.asarray(plan.start))
-        self.arrays["keys"] = keys
-        self.arrays["state"] = SeedState(carry, learner, k_run)
+    def _start_levels(self, seeds: list[int]) -> None:
+        """Fresh learners, keys and environments for these seeds' next level (each seed's
+        keys split exactly as if it trained alone)."""
+        if not seeds:
+            return
+        idx = np.asarray(seeds)
+        arrays = jax.tree.map(_local, self.arrays)
+        keys, k_init, k_reset, k_run = _split_seeds(arrays["keys"][idx], 4)
+        starts = jnp.asarray([self._plan(s).start for s in seeds], jnp.int32)
+        fresh = SeedState(self.engine.reset(k_reset, starts), self.engine.init_learner(k_init),
+                          k_run)
+        arrays["keys"] = arrays["keys"].at[idx].set(keys)
+        arrays["state"] = jax.tree.map(lambda a, b: a.at[idx].set(b), arrays["state"], fresh)
+        self.arrays = arrays
         self._place()
-        self.host.update(in_level=True, episodes=[0] * S, env_steps=[0] * S, reached=[False] * S,
-                         active=[True] * S, history=[[] for _ in range(S)], running=[None] * S,
-                         **_gate_counters(S))
-
-    def _train_level(self, plan: LevelPlan, t_start: float) -> None:
-        cfg, host = self.cfg, self.host
-        steps_per_update = cfg.num_envs * cfg.rollout_ticks
-        level_cfg = cfg.for_level(plan.name)
-        bar = self._bar(plan)
-        learner_arr, start_arr = jnp.asarray(plan.option), jnp.asarray(plan.start)
-        if self.mesh is not None and dist.is_multiprocess():
-            # every input of the compiled chunk must be global when it spans processes
-            learner_arr, start_arr = dist.place((learner_arr, start_arr),
-                                                seed_sharding(self.mesh, (learner_arr, start_arr)))
-        while any(host["active"]):
-            active = jnp.asarray(host["active"])
-            if self.mesh is not None:
-                active = dist.place(active, seed_sharding(self.mesh, active))
-            args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
-                    learner_arr, start_arr)
-            if self._compiled is None:  # one compile serves every level (ids are traced)
-                t0 = time.perf_counter()
-                self._compiled = self.engine.chunk.lower(*args).compile()
-                host["compile_seconds"] += time.perf_counter() - t0
-            t0 = time.perf_counter()
-            state, stats, _ = self._compiled(*args)
-            stats = dist.gather(stats)  # [S, U], the same on every process
-            dt = time.perf_counter() - t0
-            if not _all_finite(state.learner.params):
-                raise NonFiniteError(
-                    f"non-finite learner parameters at level {plan.level} ({plan.name}) after "
-                    f"{max(host['episodes'])} episodes (chunk {host['chunks']})")
-            self.arrays["state"] = state
-            candidates = self._account(plan, stats, steps_per_update)
-            host["chunks"] += 1
-            passed = self._accept(plan, candidates)
-            for s in range(len(self.seeds)):
-                if not host["active"][s]:
-                    continue
-                if s in passed:
-                    host["reached"][s], host["active"][s] = True, False
-                elif self._budget_spent(level_cfg, s):
-                    host["active"][s] = False
-            host["wall_seconds"] = time.perf_counter() - t_start
-            if bar is not None:
-                self._draw(bar, dt, steps_per_update)
-            if self.out_dir is not None and self._save_due():
-                self.save()
-        if bar is not None:
-            bar.close()
+        for s in seeds:
+            for k, v in LEVEL_COUNTERS.items():
+                self.host[k][s] = [] if k == "history" else v
+            self.host["reached"][s] = False
+            self.host["started"][s] = True
 
     def _save_due(self) -> bool:
         due = time.perf_counter() - self._last_save >= self.cfg.checkpoint_every
         # clocks differ between processes, and saving is collective: process 0 decides
         return dist.agree(due) if self.cfg.checkpoint_every > 0 else due
 
-    def _account(self, plan: LevelPlan, stats, steps_per_update: int) -> list[int]:
+    def _account(self, stats) -> list[int]:
         """Count a chunk's episodes and steps; the seeds whose running success reached the
         threshold."""
-        cfg, host = self.cfg.for_level(plan.name), self.host
+        host = self.host
+        steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
         candidates = []
-        for s, seed in enumerate(self.seeds):
-            if not host["active"][s]:
-                continue
+        for s in self._training():
+            plan, cfg, seed = self._plan(s), self._level_cfg(s), self.seeds[s]
             for u in range(cfg.updates_per_chunk):
                 host["episodes"][s] += int(stats.env_episodes[s, u])
                 host["env_steps"][s] += steps_per_update
@@ -333,25 +365,27 @@ class HierarchyTrainer:
         return host["episodes"][s] >= cfg.max_episodes_per_level or bool(
             cfg.max_steps_per_level and host["env_steps"][s] >= cfg.max_steps_per_level)
 
-    def _accept(self, plan: LevelPlan, candidates: list[int]) -> list[int]:
+    def _accept(self, candidates: list[int]) -> list[int]:
         """Seeds (of ``candidates``, whose running success reached the threshold) whose
         level ends now: all of them without the gate; with it, those whose frozen policy
         passes a gate attempt (tried every ``gate_interval`` chunks, and once more when
         the budget is spent)."""
-        cfg, host = self.cfg.for_level(plan.name), self.host
-        if not cfg.gate or not candidates:
+        host = self.host
+        if not self.cfg.gate or not candidates:
             return candidates
-        due = [s for s in candidates
-               if host["chunks"] >= host["gate_next"][s] or self._budget_spent(cfg, s)]
+        due = [s for s in candidates if host["chunks"] >= host["gate_next"][s]
+               or self._budget_spent(self._level_cfg(s), s)]
         if not due:
             return []
+        S = len(self.seeds)
         # the attempt number varies the gate's episodes between attempts, deterministically
         keys = _fold_in(self.arrays["keys"], jnp.asarray(host["chunks"], jnp.uint32))
-        due_mask = self._place_small(jnp.asarray([s in due for s in range(len(self.seeds))]))
+        plans = [self._plan(s) for s in range(S)]
         # one vmapped call for all seeds; those not due are skipped (their results unused)
         result, compile_s = self.engine.gate(
             keys, self.arrays["state"], self.arrays["bank"], self.arrays["learned"],
-            plan.option, plan.start, due_mask, cfg.threshold, place=self._place_small)
+            [p.option for p in plans], [p.start for p in plans], [s in due for s in range(S)],
+            [self._level_cfg(s).threshold for s in range(S)], place=self._place_small)
         host["compile_seconds"] += compile_s
         result = dist.gather(result)
         passed = []
@@ -360,58 +394,32 @@ class HierarchyTrainer:
             host["gate_success"][s] = success
             host["gate_attempts"][s] += 1
             host["gate_env_steps"][s] += int(result["env_steps"][s])
-            host["gate_next"][s] = host["chunks"] + cfg.gate_interval
+            host["gate_next"][s] = host["chunks"] + self._level_cfg(s).gate_interval
             if self._tb is not None:
-                tag = f"seed_{self.seeds[s]}/level_{plan.level}_{plan.name}"
+                tag = f"seed_{self.seeds[s]}/level_{plans[s].level}_{plans[s].name}"
                 self._tb.add_scalar(f"{tag}/gate_success", success, host["env_steps"][s])
-            if success >= cfg.threshold:
+            if success >= self._level_cfg(s).threshold:
                 passed.append(s)
         return passed
 
-    def _finish_level(self, plan: LevelPlan) -> None:
-        host, arrays = self.host, self.arrays
-        arrays["bank"] = self.engine.store_in_bank(arrays["bank"], arrays["state"].learner.params,
-                                                   plan.option)
-        arrays["learned"] = arrays["learned"].at[:, plan.option].set(True)
-        self._place()
-        host["levels"].append({
-            "template": plan.name, "level": plan.level, "episodes": list(host["episodes"]),
-            "env_steps": list(host["env_steps"]), "reached": list(host["reached"]),
-            "final_running_success": list(host["running"]),
-            # the last gate attempt's success (None: never tried), attempts, env steps spent
-            "gate_success": list(host["gate_success"]),
-            "gate_attempts": list(host["gate_attempts"]),
-            "gate_env_steps": list(host["gate_env_steps"]),
-        })
-        host["plan_index"] += 1
-        host["in_level"] = False
-
-    # ---- progress --------------------------------------------------------------------
-    def _bar(self, plan: LevelPlan):
-        if not self.progress:
-            return None
-        from tqdm.auto import tqdm
-
-        cfg = self.cfg.for_level(plan.name)
-        # a level with an env-step budget counts steps (its episode budget is then usually
-        # a formality, e.g. 10**9); otherwise it counts episodes
-        self._bar_counts = "env_steps" if cfg.max_steps_per_level else "episodes"
-        self._bar_total = cfg.max_steps_per_level or cfg.max_episodes_per_level
-        return tqdm(total=self._bar_total, desc=f"level {plan.level} {plan.name}",
-                    unit={"env_steps": "step", "episodes": "ep"}[self._bar_counts],
-                    unit_scale=True, leave=True,
-                    initial=int(np.mean(self.host[self._bar_counts])))
-
-    def _draw(self, bar, dt: float, steps_per_update: int) -> None:
+    def _finish_levels(self, seeds: list[int]) -> None:
+        """Freeze these seeds' learners into the bank and record their levels."""
         host = self.host
-        bar.n = int(min(np.mean(host[self._bar_counts]), self._bar_total))
-        rate = self.cfg.updates_per_chunk * steps_per_update * len(self.seeds) / max(dt, 1e-9)
-        runs = [r for r in host["running"] if r is not None]
-        gates = [g for g in host["gate_success"] if g is not None]
-        extra = {"gate": f"{np.mean(gates):.2f}"} if gates else {}
-        extra["done"] = f"{len(self.seeds) - sum(host['active'])}/{len(self.seeds)}"
-        if self._bar_counts == "env_steps":  # the bar counts steps: show episodes beside it
-            extra["episodes"] = f"{np.mean(host['episodes']):,.0f}"
-        bar.set_postfix(success=f"{np.mean(runs) if runs else 0:.2f}", **extra,
-                        steps_s=f"{rate:,.0f}")
-        bar.refresh()
+        idx = np.asarray(seeds)
+        options = np.asarray([self._plan(s).option for s in seeds])
+        arrays = jax.tree.map(_local, self.arrays)
+        params = jax.tree.map(lambda p: p[idx], arrays["state"].learner.params)
+        arrays["bank"] = jax.tree.map(lambda b, p: b.at[idx, options].set(p), arrays["bank"],
+                                      params)
+        arrays["learned"] = arrays["learned"].at[idx, options].set(True)
+        self.arrays = arrays
+        self._place()
+        for s in seeds:
+            record = host["levels"][host["stage"][s]]
+            for name, key in (("episodes", "episodes"), ("env_steps", "env_steps"),
+                              ("reached", "reached"), ("final_running_success", "running"),
+                              ("gate_success", "gate_success"), ("gate_attempts", "gate_attempts"),
+                              ("gate_env_steps", "gate_env_steps")):
+                record[name][s] = host[key][s]
+            host["stage"][s] += 1
+            host["started"][s] = False

@@ -36,9 +36,9 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
     trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), run["seeds"],
                                out_dir=run_dir, progress=False, run_meta=run)
     trainer.restore()
-    done, total = trainer.host["plan_index"], len(trainer.plans)
+    done, total = min(trainer.host["stage"]), len(trainer.plans)
     if done < total and not partial:
-        raise ValueError(f"{run_dir} stopped after {done} of {total} levels, so its hierarchy is "
+        raise ValueError(f"{run_dir} stopped with a seed after {done} of {total} levels, so its hierarchy is "
                          f"partly untrained; finish it with `smjax train {run['task']} --resume "
                          f"{run_dir}`, or pass --partial to play it anyway")
     return engine, trainer.arrays["bank"], trainer.arrays["learned"], run["seeds"]
