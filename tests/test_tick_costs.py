@@ -119,17 +119,21 @@ def test_evaluation_and_gate_share_one_compiled_program():
 
 
 _TWICE = """
-import json, sys
+import collections, json, sys
+import jax
 from hier_env import make_keydoor
 from smjax.train import TrainConfig
 from smjax.train.run import run
+events = collections.Counter()
+jax.monitoring.register_event_listener(lambda name, **kw: events.update([name.split("/")[-1]]))
 cfg = TrainConfig(num_envs=8, rollout_ticks=4, updates_per_chunk=1, max_episodes_per_level=8,
                   success_window=4, gate=False, eval_envs=8, eval_max_ticks=20)
-print(json.dumps(run(make_keydoor(), cfg, [0], progress=False)["compile_seconds"]))
+run(make_keydoor(), cfg, [0], progress=False)
+print(json.dumps({"hits": events["cache_hits"], "misses": events["cache_misses"]}))
 """
 
 
-def _run_in_subprocess(env_vars: dict) -> float:
+def _run_in_subprocess(env_vars: dict) -> dict:
     env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
     env.update(env_vars, PYTHONPATH=os.pathsep.join([str(ROOT / "tests"), str(ROOT)]))
     out = subprocess.run([sys.executable, "-c", _TWICE], env=env, capture_output=True,
@@ -138,11 +142,13 @@ def _run_in_subprocess(env_vars: dict) -> float:
 
 
 def test_a_second_identical_run_loads_its_programs_from_the_cache(tmp_path):
+    # (what this saves in seconds: benchmarks/RESULTS.md; timing is not asserted here)
     cache = tmp_path / "cache"
     first = _run_in_subprocess({"SMJAX_CACHE_DIR": str(cache)})
-    assert any(cache.iterdir()), "the first run wrote no compiled programs"
+    assert first["misses"] > 0 and any(cache.iterdir()), first
     second = _run_in_subprocess({"SMJAX_CACHE_DIR": str(cache)})
-    assert second < 0.5 * first, (first, second)
+    # every program the first run compiled is loaded, none compiled again
+    assert second["misses"] == 0 and second["hits"] >= first["misses"], (first, second)
     off = tmp_path / "off"
-    _run_in_subprocess({"SMJAX_CACHE_DIR": str(off), "SMJAX_COMPILATION_CACHE": "0"})
-    assert not off.exists()  # the opt-out writes nothing
+    unused = _run_in_subprocess({"SMJAX_CACHE_DIR": str(off), "SMJAX_COMPILATION_CACHE": "0"})
+    assert not off.exists() and unused["hits"] == 0  # the opt-out neither writes nor reads

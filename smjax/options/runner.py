@@ -35,6 +35,9 @@ from smjax.options.stack import (
 )
 
 NO_OPTION = -1
+# how the tick evaluates the policy bank: only the learned options that can decide (a loop
+# over them), every option at once (one batched apply), or by the backend (auto)
+FROZEN_EVALS = ("auto", "learned", "all")
 _NEVER = np.iinfo(np.int32).max // 2
 
 
@@ -124,7 +127,8 @@ class HierarchyRunner:
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, gamma: float,
                  frozen_policy: str = "greedy", allow_teleport: bool = True,
                  reset_on_learner_end: bool = True, frozen_temperature: float = 1.0,
-                 learner_acts_frozen: bool = False, reset_pool: int = 0):
+                 learner_acts_frozen: bool = False, reset_pool: int = 0,
+                 frozen_eval: str = "auto"):
         if frozen_policy not in ("greedy", "sample"):
             raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {frozen_policy!r}")
         self.env, self.env_params, self.h, self.agent = env, env_params, hierarchy, agent
@@ -141,6 +145,11 @@ class HierarchyRunner:
         if isinstance(reset_pool, bool) or not isinstance(reset_pool, int) or reset_pool < 0:
             raise ValueError(f"reset_pool must be an integer >= 0, got {reset_pool!r}")
         self.reset_pool = reset_pool
+        if frozen_eval not in FROZEN_EVALS:
+            raise ValueError(f"frozen_eval must be one of {FROZEN_EVALS}, got {frozen_eval!r}")
+        if frozen_eval == "auto":  # measured: benchmarks/RESULTS.md, section 8
+            frozen_eval = "learned" if jax.default_backend() == "cpu" else "all"
+        self.frozen_eval = frozen_eval
         tpls = hierarchy.template_list
         self.templates = tpls
         self.P = hierarchy.num_primitives
@@ -383,11 +392,16 @@ class HierarchyRunner:
         """[O, B, A] scores of the frozen policies that can decide now: the learned options
         other than the learner (the rest are never read and stay 0).
 
-        A loop over just those options, not a vmap over the whole bank: in top-down
-        training most of the bank is not learned yet (level 1: none of it), and a policy's
-        first layer on a wide observation is the tick's largest cost. Under a ``vmap`` over
-        seeds the loop runs as often as the seed with the most learned options needs.
+        ``frozen_eval="learned"``: a loop over just those options, not a vmap over the
+        whole bank: in top-down training most of the bank is not learned yet (level 1: none
+        of it), and a policy's first layer on a wide observation is the tick's largest cost
+        on a CPU. Under a ``vmap`` over seeds the loop runs as often as the seed with the
+        most learned options needs. ``"all"``: one batched apply over the whole bank (on a
+        GPU one wide kernel costs less than a loop of small ones); the unneeded rows are
+        computed but never read.
         """
+        if self.frozen_eval == "all":
+            return jax.vmap(self.agent.policy_logits, (0, None))(bank_params, obs)
         num_options = self.h.num_options
         need = controls.learned & (jnp.arange(num_options) != controls.learner)
         order = jnp.argsort(~need)  # the needed option ids first (argsort is stable)

@@ -66,6 +66,11 @@ class TrainConfig:
         this end in one rollout). None: ``num_envs``. 0: generate a fresh start for every
         environment in every tick and keep it where an episode ended (the exact but slow
         way: the generation costs as much as a step in procedurally generated worlds).
+      frozen_eval: how a tick evaluates the frozen policies: "learned" (only the learned
+        options that can decide, one after another: on a CPU most of the bank is not
+        learned yet and a wide first layer is the tick's largest cost), "all" (the whole
+        bank in one batched apply: cheaper on a GPU, where launches cost more than FLOPs),
+        "auto" (learned on a CPU, all elsewhere). The results are the same either way.
       checkpoint_every: seconds between checkpoints when an output directory is given
         (0: after every chunk); a checkpoint is also written at the end of every level.
     """
@@ -90,6 +95,7 @@ class TrainConfig:
     eval_envs: int = 256
     eval_max_ticks: int = 2000
     reset_pool: int | None = None
+    frozen_eval: str = "auto"
     checkpoint_every: float = 60.0
     tensorboard: bool = False
     agent: dict = field(default_factory=dict)
@@ -116,6 +122,8 @@ class TrainConfig:
                                          and not isinstance(self.reset_pool, bool)
                                          and self.reset_pool >= 0),
              "reset_pool", "an integer >= 0, or null for num_envs")
+        need(self.frozen_eval in ("auto", "learned", "all"), "frozen_eval",
+             "one of ('auto', 'learned', 'all')")
         need(isinstance(self.threshold, (int, float)) and 0 < self.threshold <= 1, "threshold",
              "in (0, 1]")
         need(isinstance(self.gamma, (int, float)) and 0 < self.gamma <= 1, "gamma", "in (0, 1]")

@@ -63,7 +63,7 @@ class Engine:
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                       frozen_policy=mode, allow_teleport=True,
                                       reset_on_learner_end=not cfg.continue_episodes,
-                                      reset_pool=cfg.pool_size)
+                                      reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval)
         # Gate and evaluation share one runner and one compiled program: the learner acts
         # as it will once frozen, and teleports are a traced switch (the gate: the level's
         # own setting, teleports above, calls from resets; evaluation: the final product
@@ -71,7 +71,7 @@ class Engine:
         self.episode_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                               frozen_policy=mode, allow_teleport=True,
                                               learner_acts_frozen=True,
-                                              reset_pool=cfg.pool_size)
+                                              reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval)
         obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
         self.example_obs = obs
         self.num_actions = hierarchy.num_actions

@@ -108,6 +108,27 @@ def _fold_in(keys: jax.Array, data: jax.Array) -> jax.Array:
 
 
 @jax.jit
+def _select_seeds(mask: jax.Array, new, old):
+    """Per seed (leading axis), ``new`` where ``mask`` else ``old``."""
+    def pick(a, b):
+        return jnp.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), a, b)
+    return jax.tree.map(pick, new, old)
+
+
+@jax.jit
+def _freeze(mask: jax.Array, options: jax.Array, params, bank, learned):
+    """Store each masked seed's learner params in its bank at its option; mark it learned."""
+    rows = jnp.arange(mask.shape[0])
+
+    def store(b, p):
+        keep = b[rows, options]
+        return b.at[rows, options].set(jnp.where(mask.reshape((-1,) + (1,) * (p.ndim - 1)), p, keep))
+
+    learned = learned.at[rows, options].set(learned[rows, options] | mask)
+    return jax.tree.map(store, bank, params), learned
+
+
+@jax.jit
 def _finite_flags(tree) -> jax.Array:
     flags = [jnp.isfinite(x).all() for x in jax.tree.leaves(tree)
              if jnp.issubdtype(x.dtype, jnp.floating)]
@@ -304,14 +325,15 @@ class HierarchyTrainer:
         keys split exactly as if it trained alone)."""
         if not seeds:
             return
-        idx = np.asarray(seeds)
+        # computed for every seed and selected, so that every call has the same shapes
+        # (one compile per run, however many seeds start at once)
         arrays = jax.tree.map(_local, self.arrays)
-        keys, k_init, k_reset, k_run = _split_seeds(arrays["keys"][idx], 4)
-        starts = jnp.asarray([self._plan(s).start for s in seeds], jnp.int32)
+        keys, k_init, k_reset, k_run = _split_seeds(arrays["keys"], 4)
+        starts = jnp.asarray([self._plan(s).start for s in range(len(self.seeds))], jnp.int32)
         fresh = SeedState(self.engine.reset(k_reset, starts), self.engine.init_learner(k_init),
                           k_run)
-        arrays["keys"] = arrays["keys"].at[idx].set(keys)
-        arrays["state"] = jax.tree.map(lambda a, b: a.at[idx].set(b), arrays["state"], fresh)
+        arrays["keys"], arrays["state"] = _select_seeds(
+            self._mask(seeds), (keys, fresh), (arrays["keys"], arrays["state"]))
         self.arrays = arrays
         self._place()
         for s in seeds:
@@ -319,6 +341,9 @@ class HierarchyTrainer:
                 self.host[k][s] = [] if k == "history" else v
             self.host["reached"][s] = False
             self.host["started"][s] = True
+
+    def _mask(self, seeds: list[int]) -> jax.Array:
+        return jnp.asarray([s in seeds for s in range(len(self.seeds))])
 
     def _save_due(self) -> bool:
         due = time.perf_counter() - self._last_save >= self.cfg.checkpoint_every
@@ -405,13 +430,11 @@ class HierarchyTrainer:
     def _finish_levels(self, seeds: list[int]) -> None:
         """Freeze these seeds' learners into the bank and record their levels."""
         host = self.host
-        idx = np.asarray(seeds)
-        options = np.asarray([self._plan(s).option for s in seeds])
+        options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
         arrays = jax.tree.map(_local, self.arrays)
-        params = jax.tree.map(lambda p: p[idx], arrays["state"].learner.params)
-        arrays["bank"] = jax.tree.map(lambda b, p: b.at[idx, options].set(p), arrays["bank"],
-                                      params)
-        arrays["learned"] = arrays["learned"].at[idx, options].set(True)
+        arrays["bank"], arrays["learned"] = _freeze(
+            self._mask(seeds), options, arrays["state"].learner.params, arrays["bank"],
+            arrays["learned"])
         self.arrays = arrays
         self._place()
         for s in seeds:
