@@ -1,0 +1,229 @@
+"""``check_env``: the environment contract, checked on a short random rollout.
+
+Compile time dominates on a CPU, so the checks share four programs: the eager (unjitted)
+reset and step, one jitted single reset, one jitted single-environment step that also
+evaluates ``step_env`` and ``reset_env`` (for the auto-reset check), and one jitted
+batched rollout whose ``params`` is an argument (a shorter ``max_steps`` reuses it).
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from smjax.core import spaces
+from smjax.testing.compare import assert_trees_close, fail, index, trees_mismatch
+
+
+def make_rollout(env, action_space: spaces.Space, num_envs: int, steps: int) -> Callable:
+    """jit(key, params) -> ((reset obs, reset state), (states, actions, keys, step outputs)).
+
+    ``states[t]`` is the batch *before* step t; every leaf is [steps, num_envs, ...].
+    """
+    batched_reset = jax.vmap(env.reset, in_axes=(0, None))
+    batched_step = jax.vmap(env.step, in_axes=(0, 0, 0, None))
+
+    def run(key, params):
+        key_reset, key_run = jax.random.split(key)
+        obs, state = batched_reset(jax.random.split(key_reset, num_envs), params)
+
+        def body(state, k):
+            key_act, key_step = jax.random.split(k)
+            actions = jax.vmap(action_space.sample)(jax.random.split(key_act, num_envs))
+            step_keys = jax.random.split(key_step, num_envs)
+            out = batched_step(step_keys, state, actions, params)
+            return out[1], (state, actions, step_keys, out)
+
+        _, traj = jax.lax.scan(body, state, jax.random.split(key_run, steps))
+        return (obs, state), traj
+
+    return jax.jit(run)
+
+
+def _make_one_step(env) -> Callable:
+    """jit: one environment's ``step`` plus what its auto-reset should have combined.
+
+    ``ended`` holds step_env's observation under both key conventions in use: the base
+    class hands step_env the first half of ``split(key)``; an environment whose reset
+    ignores its key (football) may hand step_env the whole key.
+    """
+    def one(key, state, action, params):
+        key_step, key_reset = jax.random.split(key)
+        ended = (env.step_env(key_step, state, action, params)[0],
+                 env.step_env(key, state, action, params)[0])
+        return {"step": env.step(key, state, action, params), "ended": ended,
+                "fresh": env.reset_env(key_reset, params)}
+
+    return jax.jit(one)
+
+
+def short_params(params: Any, steps: int) -> Any | None:
+    """params with ``max_steps`` cut to ``steps // 4`` so episodes end in a rollout."""
+    if not hasattr(params, "max_steps") or not hasattr(params, "replace"):
+        return None
+    old = params.max_steps
+    short = max(1, steps // 4)
+    return params.replace(max_steps=jnp.asarray(short, jnp.asarray(old).dtype))
+
+
+# ---- the checks ------------------------------------------------------------------------
+def check_spaces(env, params, who: str) -> tuple[spaces.Space, spaces.Space]:
+    act, obs = env.action_space(params), env.observation_space(params)
+    for name, space in (("action_space", act), ("observation_space", obs)):
+        if not isinstance(space, spaces.Space):
+            fail("spaces", who, f"{name} returned {type(space).__name__}, not a smjax space")
+    return act, obs
+
+
+def check_jit_eager(env, params, key, act_space, reset_one, step_one, who: str) -> None:
+    """Unjitted (op by op) and jitted reset/step agree for two steps."""
+    key_reset, key = jax.random.split(key)
+    eager = env.reset(key_reset, params)
+    assert_trees_close(reset_one(key_reset, params), eager, prop="jit == eager", who=who,
+                       where="reset")
+    state = eager[1]
+    for t in range(2):
+        key, key_act, key_step = jax.random.split(key, 3)
+        action = act_space.sample(key_act)
+        eager = env.step(key_step, state, action, params)
+        assert_trees_close(step_one(key_step, state, action, params)["step"], eager,
+                           prop="jit == eager", who=who, where=f"step {t}")
+        state = eager[1]
+
+
+def check_step_outputs(traj, obs_space: spaces.Space, who: str) -> None:
+    obs, _, reward, terminated, truncated, info = traj[3]
+    lead = reward.shape
+    if len(lead) != 2:
+        fail("step outputs", who, f"reward has shape {reward.shape[2:]} per env, expected ()")
+    want = {"obs": (lead + tuple(obs_space.shape), jnp.dtype(obs_space.dtype)),
+            "terminated": (lead, jnp.dtype(bool)), "truncated": (lead, jnp.dtype(bool))}
+    got = {"obs": obs, "terminated": terminated, "truncated": truncated}
+    for name, (shape, dtype) in want.items():
+        x = got[name]
+        if x.shape != shape or x.dtype != dtype:
+            fail("step outputs", who, f"{name} has shape {x.shape[2:]} dtype {x.dtype} per env, "
+                 f"expected shape {shape[2:]} dtype {dtype}")
+    if not jnp.issubdtype(reward.dtype, jnp.floating):
+        fail("step outputs", who, f"reward dtype {reward.dtype} is not floating")
+    if not isinstance(info, dict) or "final_observation" not in info:
+        fail("final_observation", who, 'step returned no info["final_observation"]')
+
+
+def check_observations(reset_obs, traj, obs_space: spaces.Space, who: str) -> None:
+    """Every observation of the rollout is finite and inside the observation space."""
+    obs, *_, info = traj[3]
+    batches = {"reset": reset_obs[None], "step": obs,
+               'info["final_observation"]': info["final_observation"]}
+    contains = jax.vmap(jax.vmap(obs_space.contains))  # eager: a few ops, nothing to compile
+    for name, o in batches.items():
+        o = jnp.asarray(o)
+        if jnp.issubdtype(o.dtype, jnp.inexact):
+            finite = np.asarray(jnp.isfinite(o).reshape(o.shape[:2] + (-1,)).all(-1))
+            if not finite.all():
+                t, i = np.argwhere(~finite)[0]
+                fail("observation finite", who,
+                     f"{name} observation at step {t}, env {i} has non-finite values")
+        inside = np.asarray(contains(o))
+        if not inside.all():
+            t, i = np.argwhere(~inside)[0]
+            bad = np.asarray(o[t, i])
+            fail("observation in space", who, f"{name} observation at step {t}, env {i} lies "
+                 f"outside {obs_space!r} (min {bad.min()}, max {bad.max()})")
+
+
+def check_vmap_loop(params, key_roll, rollout_out, reset_one, step_one, times, who: str) -> None:
+    """The batched rollout, env by env, equals single-environment reset and steps."""
+    (reset_obs, reset_state), (states, actions, keys, out) = rollout_out
+    num_envs = actions.shape[1]
+    reset_keys = jax.random.split(jax.random.split(key_roll)[0], num_envs)
+    for i in range(num_envs):
+        assert_trees_close(reset_one(reset_keys[i], params), index((reset_obs, reset_state), i),
+                           prop="vmap == loop", who=who, where=f"reset, env {i}")
+    for t in times:
+        for i in range(num_envs):
+            single = step_one(keys[t, i], index(states, t, i), actions[t, i], params)["step"]
+            assert_trees_close(single, index(out, t, i), prop="vmap == loop", who=who,
+                               where=f"step {t}, env {i}")
+
+
+def check_auto_reset(params, traj, step_one, who: str, max_checks: int = 4) -> None:
+    """Ended episodes restart from reset_env; final_observation is step_env's observation."""
+    states, actions, keys, (obs, state, _, terminated, truncated, info) = traj
+    done = np.asarray(terminated | truncated)
+    final = info["final_observation"]
+    for t, i in np.argwhere(~done)[:max_checks]:
+        assert_trees_close(index(final, t, i), index(obs, t, i), prop="final_observation",
+                           who=who, where=f"step {t}, env {i} (episode goes on): it differs "
+                           f"from the returned observation")
+    for t, i in np.argwhere(done)[:max_checks]:
+        single = step_one(keys[t, i], index(states, t, i), actions[t, i], params)
+        assert_trees_close((index(obs, t, i), index(state, t, i)), single["fresh"],
+                           prop="auto-reset", who=who, where=f"step {t}, env {i} (episode "
+                           f"ended): the returned observation/state is not reset_env's")
+        got = index(final, t, i)
+        if all(trees_mismatch(got, ended) for ended in single["ended"]):
+            fail("final_observation", who, f"step {t}, env {i} (episode ended): it is not "
+                 f"step_env's observation: {trees_mismatch(got, single['ended'][0])}")
+
+
+def check_render(env, params, state, who: str) -> None:
+    try:
+        image = env.render(state, params)
+    except NotImplementedError:  # rendering is optional
+        return
+    image = np.asarray(image)
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[-1] != 3:
+        fail("render", who, f"render returned {image.dtype} {image.shape}, expected uint8 "
+             f"(H, W, 3)")
+
+
+def _spread(steps: int, count: int = 3) -> list[int]:
+    return sorted({int(t) for t in np.linspace(0, steps - 1, min(steps, count))})
+
+
+def _any_done(traj) -> bool:
+    return bool(np.any(np.asarray(traj[3][3] | traj[3][4])))
+
+
+def check_env(env, params: Any = None, *, num_envs: int = 8, steps: int = 64,
+              key: jax.Array | None = None, render: bool = True) -> None:
+    """Check that ``env`` meets the smjax environment contract (see ``smjax.testing``).
+
+    Plays ``num_envs`` environments for ``steps`` random steps. If no episode ends and
+    ``params`` has a ``max_steps`` field, the auto-reset check plays again with
+    ``max_steps = steps // 4``; other environments need params (or ``steps``) under which
+    episodes end. Raises ``AssertionError`` whose message starts with the property.
+    """
+    params = env.default_params if params is None else params
+    key = jax.random.PRNGKey(0) if key is None else key
+    who = getattr(env, "name", type(env).__name__)
+    act_space, obs_space = check_spaces(env, params, who)
+    reset_one, step_one = jax.jit(env.reset), _make_one_step(env)
+    key_eager, key_roll = jax.random.split(key)
+    check_jit_eager(env, params, key_eager, act_space, reset_one, step_one, who)
+
+    rollout = make_rollout(env, act_space, num_envs, steps)
+    first = rollout(key_roll, params)
+    (reset_obs, _), traj = first
+    check_step_outputs(traj, obs_space, who)
+    assert_trees_close(rollout(key_roll, params), first, prop="determinism", who=who,
+                       exact=True, where="two rollouts with the same key")
+    check_observations(reset_obs, traj, obs_space, who)
+    check_vmap_loop(params, key_roll, first, reset_one, step_one, _spread(steps), who)
+    if not _any_done(traj):
+        short = short_params(params, steps)
+        if short is None:
+            fail("auto-reset", who, f"no episode ended in {steps} random steps of {num_envs} "
+                 f"environments; pass params (or steps) under which episodes end")
+        (reset_obs, _), traj = rollout(key_roll, short)
+        if not _any_done(traj):
+            fail("auto-reset", who, f"no episode ended in {steps} steps, even with "
+                 f"max_steps={max(1, steps // 4)}")
+        check_observations(reset_obs, traj, obs_space, who)
+        params = short
+    check_auto_reset(params, traj, step_one, who)
+    if render:
+        check_render(env, params, index(traj[0], 0, 0), who)
