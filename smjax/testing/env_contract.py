@@ -1,12 +1,13 @@
 """``check_env``: the environment contract, checked on a short random rollout.
 
-Compile time dominates on a CPU, so the checks share four programs: the eager (unjitted)
-reset and step, one jitted single reset, one jitted single-environment step that also
-evaluates ``step_env`` and ``reset_env`` (for the auto-reset check), and one jitted
-batched rollout whose ``params`` is an argument (a shorter ``max_steps`` reuses it).
+Compile time dominates on a CPU, so the checks share three programs: the eager
+(unjitted) reset and step; one jitted single-environment program evaluating ``reset``,
+``step`` and ``step_env``; and one jitted batched rollout whose ``params`` is an argument
+(a shorter ``max_steps`` reuses it, and so does ``check_hierarchy`` at the same sizes).
 """
 from __future__ import annotations
 
+import weakref
 from typing import Any, Callable
 
 import jax
@@ -17,11 +18,21 @@ from smjax.core import spaces
 from smjax.testing.compare import assert_trees_close, fail, index, trees_mismatch
 
 
+# Rollout programs by environment, so check_hierarchy after check_env (same sizes) reuses
+# the compiled rollout; weak keys let environments (and their programs) be collected.
+_ROLLOUTS: "weakref.WeakKeyDictionary[Any, dict]" = weakref.WeakKeyDictionary()
+
+
 def make_rollout(env, action_space: spaces.Space, num_envs: int, steps: int) -> Callable:
     """jit(key, params) -> ((reset obs, reset state), (states, actions, keys, step outputs)).
 
     ``states[t]`` is the batch *before* step t; every leaf is [steps, num_envs, ...].
     """
+    cache_key = (repr(action_space), num_envs, steps)
+    try:
+        return _ROLLOUTS[env][cache_key]
+    except (KeyError, TypeError):  # TypeError: an env that cannot be weakly referenced
+        pass
     batched_reset = jax.vmap(env.reset, in_axes=(0, None))
     batched_step = jax.vmap(env.step, in_axes=(0, 0, 0, None))
 
@@ -39,22 +50,27 @@ def make_rollout(env, action_space: spaces.Space, num_envs: int, steps: int) -> 
         _, traj = jax.lax.scan(body, state, jax.random.split(key_run, steps))
         return (obs, state), traj
 
-    return jax.jit(run)
+    program = jax.jit(run)
+    try:
+        _ROLLOUTS.setdefault(env, {})[cache_key] = program
+    except TypeError:
+        pass
+    return program
 
 
-def _make_one_step(env) -> Callable:
-    """jit: one environment's ``step`` plus what its auto-reset should have combined.
+def _make_one_env(env) -> Callable:
+    """jit: one environment's ``reset(reset_key)`` and ``step``, and step_env's observation.
 
+    One program for every single-environment check (one compile instead of three).
     ``ended`` holds step_env's observation under both key conventions in use: the base
     class hands step_env the first half of ``split(key)``; an environment whose reset
     ignores its key (football) may hand step_env the whole key.
     """
-    def one(key, state, action, params):
-        key_step, key_reset = jax.random.split(key)
-        ended = (env.step_env(key_step, state, action, params)[0],
+    def one(reset_key, key, state, action, params):
+        ended = (env.step_env(jax.random.split(key)[0], state, action, params)[0],
                  env.step_env(key, state, action, params)[0])
-        return {"step": env.step(key, state, action, params), "ended": ended,
-                "fresh": env.reset_env(key_reset, params)}
+        return {"reset": env.reset(reset_key, params), "ended": ended,
+                "step": env.step(key, state, action, params)}
 
     return jax.jit(one)
 
@@ -77,19 +93,19 @@ def check_spaces(env, params, who: str) -> tuple[spaces.Space, spaces.Space]:
     return act, obs
 
 
-def check_jit_eager(env, params, key, act_space, reset_one, step_one, who: str) -> None:
+def check_jit_eager(env, params, key, act_space, one, who: str) -> None:
     """Unjitted (op by op) and jitted reset/step agree for two steps."""
     key_reset, key = jax.random.split(key)
     eager = env.reset(key_reset, params)
-    assert_trees_close(reset_one(key_reset, params), eager, prop="jit == eager", who=who,
-                       where="reset")
     state = eager[1]
     for t in range(2):
         key, key_act, key_step = jax.random.split(key, 3)
         action = act_space.sample(key_act)
+        jitted = one(key_reset, key_step, state, action, params)
+        if t == 0:
+            assert_trees_close(jitted["reset"], eager, prop="jit == eager", who=who, where="reset")
         eager = env.step(key_step, state, action, params)
-        assert_trees_close(step_one(key_step, state, action, params)["step"], eager,
-                           prop="jit == eager", who=who, where=f"step {t}")
+        assert_trees_close(jitted["step"], eager, prop="jit == eager", who=who, where=f"step {t}")
         state = eager[1]
 
 
@@ -134,22 +150,22 @@ def check_observations(reset_obs, traj, obs_space: spaces.Space, who: str) -> No
                  f"outside {obs_space!r} (min {bad.min()}, max {bad.max()})")
 
 
-def check_vmap_loop(params, key_roll, rollout_out, reset_one, step_one, times, who: str) -> None:
+def check_vmap_loop(params, key_roll, rollout_out, one, times, who: str) -> None:
     """The batched rollout, env by env, equals single-environment reset and steps."""
     (reset_obs, reset_state), (states, actions, keys, out) = rollout_out
     num_envs = actions.shape[1]
     reset_keys = jax.random.split(jax.random.split(key_roll)[0], num_envs)
-    for i in range(num_envs):
-        assert_trees_close(reset_one(reset_keys[i], params), index((reset_obs, reset_state), i),
-                           prop="vmap == loop", who=who, where=f"reset, env {i}")
     for t in times:
         for i in range(num_envs):
-            single = step_one(keys[t, i], index(states, t, i), actions[t, i], params)["step"]
-            assert_trees_close(single, index(out, t, i), prop="vmap == loop", who=who,
+            single = one(reset_keys[i], keys[t, i], index(states, t, i), actions[t, i], params)
+            if t == times[0]:
+                assert_trees_close(single["reset"], index((reset_obs, reset_state), i),
+                                   prop="vmap == loop", who=who, where=f"reset, env {i}")
+            assert_trees_close(single["step"], index(out, t, i), prop="vmap == loop", who=who,
                                where=f"step {t}, env {i}")
 
 
-def check_auto_reset(params, traj, step_one, who: str, max_checks: int = 4) -> None:
+def check_auto_reset(params, traj, one, who: str, max_checks: int = 4) -> None:
     """Ended episodes restart from reset_env; final_observation is step_env's observation."""
     states, actions, keys, (obs, state, _, terminated, truncated, info) = traj
     done = np.asarray(terminated | truncated)
@@ -159,8 +175,9 @@ def check_auto_reset(params, traj, step_one, who: str, max_checks: int = 4) -> N
                            who=who, where=f"step {t}, env {i} (episode goes on): it differs "
                            f"from the returned observation")
     for t, i in np.argwhere(done)[:max_checks]:
-        single = step_one(keys[t, i], index(states, t, i), actions[t, i], params)
-        assert_trees_close((index(obs, t, i), index(state, t, i)), single["fresh"],
+        key = keys[t, i]
+        single = one(jax.random.split(key)[1], key, index(states, t, i), actions[t, i], params)
+        assert_trees_close((index(obs, t, i), index(state, t, i)), single["reset"],
                            prop="auto-reset", who=who, where=f"step {t}, env {i} (episode "
                            f"ended): the returned observation/state is not reset_env's")
         got = index(final, t, i)
@@ -201,9 +218,9 @@ def check_env(env, params: Any = None, *, num_envs: int = 8, steps: int = 64,
     key = jax.random.PRNGKey(0) if key is None else key
     who = getattr(env, "name", type(env).__name__)
     act_space, obs_space = check_spaces(env, params, who)
-    reset_one, step_one = jax.jit(env.reset), _make_one_step(env)
+    one = _make_one_env(env)
     key_eager, key_roll = jax.random.split(key)
-    check_jit_eager(env, params, key_eager, act_space, reset_one, step_one, who)
+    check_jit_eager(env, params, key_eager, act_space, one, who)
 
     rollout = make_rollout(env, act_space, num_envs, steps)
     first = rollout(key_roll, params)
@@ -212,7 +229,7 @@ def check_env(env, params: Any = None, *, num_envs: int = 8, steps: int = 64,
     assert_trees_close(rollout(key_roll, params), first, prop="determinism", who=who,
                        exact=True, where="two rollouts with the same key")
     check_observations(reset_obs, traj, obs_space, who)
-    check_vmap_loop(params, key_roll, first, reset_one, step_one, _spread(steps), who)
+    check_vmap_loop(params, key_roll, first, one, _spread(steps), who)
     if not _any_done(traj):
         short = short_params(params, steps)
         if short is None:
@@ -224,6 +241,6 @@ def check_env(env, params: Any = None, *, num_envs: int = 8, steps: int = 64,
                  f"max_steps={max(1, steps // 4)}")
         check_observations(reset_obs, traj, obs_space, who)
         params = short
-    check_auto_reset(params, traj, step_one, who)
+    check_auto_reset(params, traj, one, who)
     if render:
         check_render(env, params, index(traj[0], 0, 0), who)
