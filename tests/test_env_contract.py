@@ -8,12 +8,15 @@ Craft worlds, Fetch and football are marked slow. The harness replaces the per-e
 """
 from __future__ import annotations
 
+import json
 import os
+from pathlib import Path
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 from jax.custom_batching import custom_vmap
 
@@ -49,6 +52,22 @@ def test_craft_plain_world_and_an_inline_hierarchy():
     check_hierarchy(env, params, hierarchy, **SMALL)
 
 
+def _notebook_env():
+    """The environment notebooks/custom_env.ipynb defines (its cell run here, unchanged)."""
+    path = Path(__file__).resolve().parent.parent / "notebooks" / "custom_env.ipynb"
+    cells = [c for c in json.loads(path.read_text())["cells"] if c["cell_type"] == "code"]
+    source = next("".join(c["source"]) for c in cells if "class KeyChest" in "".join(c["source"]))
+    namespace = {"jax": jax, "jnp": jnp, "np": np}
+    exec(compile(source, str(path), "exec"), namespace)
+    return namespace["KeyChest"]()
+
+
+def test_the_notebook_environment_meets_the_contract():
+    env = _notebook_env()
+    check_env(env, env.default_params.replace(max_steps=4), **SMALL)
+    check_hierarchy(env, env.default_params, "paper", **SMALL)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("task,hierarchy", [("get_gem", "paper"), ("get_gold", "paper"),
                                             ("make_bow", "recipe")])
@@ -63,8 +82,10 @@ def test_craft_worlds(task, hierarchy):
 def test_fetch_stack3():
     env, params = smjax.make("fetch/stack3", max_steps=4)
     # Rendering needs an OpenGL backend; test_fetch_render_brax.py checks it where one exists.
-    check_env(env, params, num_envs=2, steps=8, render=False)
-    check_hierarchy(env, params, "paper", num_envs=2, steps=8, num_states=8, loop_states=2)
+    # MJX's solver leaves ~1e-6 residuals on accelerations at rest: a looser atol.
+    check_env(env, params, num_envs=2, steps=8, render=False, atol=1e-4)
+    check_hierarchy(env, params, "paper", num_envs=2, steps=8, num_states=8, loop_states=2,
+                    atol=1e-4)
 
 
 @pytest.mark.slow

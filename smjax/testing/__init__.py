@@ -27,12 +27,12 @@ outcome satisfies the template), ``teleport action``/``controller action`` (insi
 action space).
 
 Floats computed by two different programs (jit vs eager, vmap vs loop) are compared with
-``RTOL``/``ATOL``: XLA fuses them differently, which changes float32 rounding; integer and
-bool leaves must be equal.
+``RTOL``/``ATOL`` (or the ``rtol``/``atol`` a check is given): XLA fuses them differently,
+which changes float32 rounding; integer and bool leaves must be equal.
 """
-from smjax.testing.compare import ATOL, RTOL, assert_trees_close, trees_mismatch
+from smjax.testing.compare import ATOL, RTOL, assert_trees_close, tolerances, trees_mismatch
 from smjax.testing.env_contract import check_env
 from smjax.testing.hierarchy_contract import check_hierarchy, check_template
 
 __all__ = ["check_env", "check_hierarchy", "check_template", "assert_trees_close",
-           "trees_mismatch", "RTOL", "ATOL"]
+           "trees_mismatch", "tolerances", "RTOL", "ATOL"]

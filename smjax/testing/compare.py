@@ -1,7 +1,9 @@
 """Pytree comparisons whose failures name a contract property (used by the checkers)."""
 from __future__ import annotations
 
-from typing import Any
+import contextlib
+from contextvars import ContextVar
+from typing import Any, Iterator
 
 import jax
 import jax.numpy as jnp
@@ -11,6 +13,21 @@ import numpy as np
 # XLA fuses a vmapped or unjitted computation differently, which changes float32
 # rounding by a few ulps; discrete leaves (ints, bools) must still agree exactly.
 RTOL, ATOL = 1e-5, 1e-6
+_TOLERANCES: ContextVar[tuple[float, float]] = ContextVar("tolerances", default=(RTOL, ATOL))
+
+
+@contextlib.contextmanager
+def tolerances(rtol: float = RTOL, atol: float = ATOL) -> Iterator[None]:
+    """Within the block, floats of two programs agree within ``rtol``/``atol``.
+
+    A physics engine's solver (MJX) leaves residuals of ~1e-6 in absolute terms on
+    quantities near zero (accelerations at rest), so Fetch is checked with a larger atol.
+    """
+    token = _TOLERANCES.set((float(rtol), float(atol)))
+    try:
+        yield
+    finally:
+        _TOLERANCES.reset(token)
 
 
 def fail(prop: str, who: str, detail: str) -> None:
@@ -21,7 +38,8 @@ def fail(prop: str, who: str, detail: str) -> None:
 def _first_diff(a: np.ndarray, b: np.ndarray) -> str:
     same = a == b
     if np.issubdtype(a.dtype, np.inexact):
-        same = same | (np.isnan(a) & np.isnan(b)) | np.isclose(a, b, rtol=RTOL, atol=ATOL)
+        rtol, atol = _TOLERANCES.get()
+        same = same | (np.isnan(a) & np.isnan(b)) | np.isclose(a, b, rtol=rtol, atol=atol)
     diff = np.argwhere(~np.asarray(same).reshape(a.shape))
     if a.ndim == 0 or diff.size == 0:
         return f"{a!r} vs {b!r}"
@@ -35,13 +53,14 @@ def _leaf_mismatch(a: np.ndarray, b: np.ndarray, exact: bool) -> str | None:
     if exact or not np.issubdtype(a.dtype, np.inexact):
         same = np.array_equal(a, b, equal_nan=np.issubdtype(a.dtype, np.inexact))
         return None if same else f"values differ, {_first_diff(a, b)}"
-    if np.allclose(a, b, rtol=RTOL, atol=ATOL, equal_nan=True):
+    rtol, atol = _TOLERANCES.get()
+    if np.allclose(a, b, rtol=rtol, atol=atol, equal_nan=True):
         return None
-    return f"values differ beyond rtol={RTOL}, atol={ATOL}, {_first_diff(a, b)}"
+    return f"values differ beyond rtol={rtol}, atol={atol}, {_first_diff(a, b)}"
 
 
 def trees_mismatch(got: Any, want: Any, exact: bool = False) -> str | None:
-    """None if two pytrees agree (floats within RTOL/ATOL unless ``exact``), else why not."""
+    """None if two pytrees agree (floats within the tolerances unless ``exact``), else why not."""
     got_leaves, got_def = jax.tree_util.tree_flatten_with_path(got)
     want_leaves, want_def = jax.tree_util.tree_flatten_with_path(want)
     if got_def != want_def:

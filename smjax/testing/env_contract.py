@@ -15,7 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.core import spaces
-from smjax.testing.compare import assert_trees_close, fail, index, trees_mismatch
+from smjax.testing.compare import (
+    ATOL, RTOL, assert_trees_close, fail, index, tolerances, trees_mismatch,
+)
 
 
 # Rollout programs by environment, so check_hierarchy after check_env (same sizes) reuses
@@ -206,14 +208,21 @@ def _any_done(traj) -> bool:
 
 
 def check_env(env, params: Any = None, *, num_envs: int = 8, steps: int = 64,
-              key: jax.Array | None = None, render: bool = True) -> None:
+              key: jax.Array | None = None, render: bool = True, rtol: float = RTOL,
+              atol: float = ATOL) -> None:
     """Check that ``env`` meets the smjax environment contract (see ``smjax.testing``).
 
     Plays ``num_envs`` environments for ``steps`` random steps. If no episode ends and
     ``params`` has a ``max_steps`` field, the auto-reset check plays again with
     ``max_steps = steps // 4``; other environments need params (or ``steps``) under which
-    episodes end. Raises ``AssertionError`` whose message starts with the property.
+    episodes end. ``rtol``/``atol`` bound float differences between two programs (jit vs
+    eager, vmap vs loop). Raises ``AssertionError`` whose message starts with the property.
     """
+    with tolerances(rtol, atol):
+        _check_env(env, params, num_envs, steps, key, render)
+
+
+def _check_env(env, params, num_envs: int, steps: int, key, render: bool) -> None:
     params = env.default_params if params is None else params
     key = jax.random.PRNGKey(0) if key is None else key
     who = getattr(env, "name", type(env).__name__)

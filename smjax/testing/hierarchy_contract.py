@@ -16,7 +16,9 @@ import numpy as np
 
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.template import OptionTemplate
-from smjax.testing.compare import all_equal, assert_trees_close, fail, index
+from smjax.testing.compare import (
+    ATOL, RTOL, all_equal, assert_trees_close, fail, index, tolerances,
+)
 from smjax.testing.env_contract import make_rollout
 
 PREDICATES = ("initiation", "satisfied", "failed")
@@ -111,7 +113,8 @@ def check_template(env, params, tpl: OptionTemplate, states, key, who: str,
 
 def check_hierarchy(env, params: Any, hierarchy: Hierarchy | str, *, num_envs: int = 8,
                     steps: int = 16, num_states: int = 32, loop_states: int = 4,
-                    key: jax.Array | None = None) -> None:
+                    key: jax.Array | None = None, rtol: float = RTOL,
+                    atol: float = ATOL) -> None:
     """Check every template of ``hierarchy`` (a Hierarchy, or a name in ``env.hierarchies()``).
 
     On ``num_states`` states spread over ``steps`` random steps of ``num_envs``
@@ -120,6 +123,7 @@ def check_hierarchy(env, params: Any, hierarchy: Hierarchy | str, *, num_envs: i
     satisfies the template wherever it is initiable and the teleport moved the state;
     teleport and controller actions lie inside the action space. Raises
     ``AssertionError`` whose message starts with the property and names the template.
+    ``rtol``/``atol`` as in ``check_env``.
     """
     params = env.default_params if params is None else params
     key = jax.random.PRNGKey(1) if key is None else key
@@ -130,5 +134,6 @@ def check_hierarchy(env, params: Any, hierarchy: Hierarchy | str, *, num_envs: i
     states = random_states(env, params, key_states, num_envs, steps, num_states)
     for tpl in hierarchy.template_list:
         tpl_key = jax.random.fold_in(key_calls, zlib.crc32(tpl.name.encode()))
-        check_template(env, params, tpl, states, tpl_key, f"{env_name} template {tpl.name!r}",
-                       loop_states)
+        with tolerances(rtol, atol):
+            check_template(env, params, tpl, states, tpl_key,
+                           f"{env_name} template {tpl.name!r}", loop_states)
