@@ -28,7 +28,8 @@ def random_states(env, params, key, num_envs: int, steps: int, count: int) -> An
     """``count`` states spread over a random-play rollout (leading axis ``count``)."""
     rollout = make_rollout(env, env.action_space(params), num_envs, steps)
     _, (states, *_) = rollout(key, params)
-    flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), states)
+    # explicit size, not -1: MJX states hold zero-size arrays
+    flat = jax.tree.map(lambda x: x.reshape((steps * num_envs,) + x.shape[2:]), states)
     picks = np.linspace(0, steps * num_envs - 1, min(count, steps * num_envs)).astype(int)
     return jax.tree.map(lambda x: x[picks], flat)
 
@@ -42,6 +43,7 @@ def _template_fn(env, tpl: OptionTemplate, params) -> Callable:
         if tpl.teleport is not None:
             jumped, action = tpl.teleport(key_tp, state, params)
             outcome = env.step_env(key_step, jumped, action, params)[1]
+            out["teleport_state"] = jumped
             out["teleport_action"] = jnp.asarray(action)
             # The promise may hold after the jump itself (Craft adds a crafted item) or
             # only after the named action (Craft picks a primitive up with USE).
