@@ -152,7 +152,8 @@ class WildControllerKeyDoor(KeyDoor):
 
 @pytest.mark.parametrize("env,match", [
     (LoudCorridor(), "observation in space failed for tests/corridor"),
-    (BatchSensitiveCorridor(), r"vmap == loop failed for tests/corridor: step 0, env 0: leaf \[2\]"),
+    (BatchSensitiveCorridor(), r"vmap == loop failed for tests/corridor: step 0, env 0: "
+                               r"leaf \[2\]"),  # the reward
     (NoResetCorridor(), "auto-reset failed for tests/corridor"),
 ], ids=["obs-outside-space", "vmap-differs", "no-auto-reset"])
 def test_broken_env_is_named(env, match):
