@@ -68,6 +68,15 @@ def test_the_notebook_environment_meets_the_contract():
     check_hierarchy(env, env.default_params, "paper", **SMALL)
 
 
+def test_an_adapted_gymnax_environment_meets_the_contract():
+    gymnax = pytest.importorskip("gymnax", reason="gymnax is an optional peer dependency")
+    from smjax.core.adapters import from_gymnax
+
+    env, params = from_gymnax(*gymnax.make("CartPole-v1"))
+    # a short time limit: episodes end inside the rollout whatever the pole does
+    check_env(env, params.replace(max_steps_in_episode=8), **SMALL)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("task,hierarchy", [("get_gem", "paper"), ("get_gold", "paper"),
                                             ("make_bow", "recipe")])

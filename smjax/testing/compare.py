@@ -66,7 +66,9 @@ def trees_mismatch(got: Any, want: Any, exact: bool = False) -> str | None:
     if got_def != want_def:
         return f"tree structures differ: {got_def} vs {want_def}"
     for (path, a), (_, b) in zip(got_leaves, want_leaves):
-        why = _leaf_mismatch(np.asarray(a), np.asarray(b), exact)
+        # jnp first: a Python scalar leaf (gymnax states start with time=0) is compared as
+        # the int32/float32 JAX makes of it, not as NumPy's int64/float64.
+        why = _leaf_mismatch(np.asarray(jnp.asarray(a)), np.asarray(jnp.asarray(b)), exact)
         if why is not None:
             return f"leaf {jax.tree_util.keystr(path) or '(value)'}: {why}"
     return None
