@@ -3,8 +3,8 @@ deliberately broken environments, for which the harness must name the broken pro
 
 Compile time dominates on a CPU, so the default suite checks the small test
 environments, one Craft task and the broken environments with small batches; the other
-Craft worlds, Fetch and football are marked slow. The harness replaces the per-env
-"vmapped batch equals unbatched runs" tests the env test files used to write by hand.
+Craft worlds, Fetch and football are marked slow. The Craft check here replaces
+test_craft_api's hand-written "vmapped batch equals unbatched runs" test.
 """
 from __future__ import annotations
 
