@@ -17,6 +17,7 @@ class Space:
         raise NotImplementedError
 
     def contains(self, x: jax.Array) -> jax.Array:
+        """Traceable bool: every element of ``x`` lies in the set (NaN never does)."""
         raise NotImplementedError
 
 
@@ -35,7 +36,10 @@ class Discrete(Space):
 
     def contains(self, x: jax.Array) -> jax.Array:
         x = jnp.asarray(x)
-        return jnp.logical_and(jnp.all(x >= 0), jnp.all(x < self.n))
+        inside = jnp.logical_and(jnp.all(x >= 0), jnp.all(x < self.n))
+        if jnp.issubdtype(x.dtype, jnp.integer):
+            return inside
+        return jnp.logical_and(inside, jnp.all(x == jnp.floor(x)))  # 1.5 is no action
 
     def __repr__(self) -> str:
         return f"Discrete({self.n}, shape={self.shape})"

@@ -1,4 +1,4 @@
-"""results.json, curves.csv and curves.png exactly as DESIGN.md section 6 specifies."""
+"""results.json, curves.csv and curves.png, in the format docs/guide.md section 5 describes."""
 from __future__ import annotations
 
 import csv

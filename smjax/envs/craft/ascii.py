@@ -1,6 +1,6 @@
 """Craft maps as text: ``from_ascii``, ``to_ascii``, ``inventory_dict`` and the reference map.
 
-Legend (DESIGN.md section 3): ``#`` boundary, ``.`` empty, ``0 1 2`` workshops, ``~`` water,
+Legend (docs/environments.md, Craft): ``#`` boundary, ``.`` empty, ``0 1 2`` workshops, ``~`` water,
 ``S`` stone, ``i`` iron, ``g`` grass, ``w`` wood, ``r`` rock, ``G`` gold, ``E`` gem, ``@`` the
 agent (standing on an empty cell, facing DOWN: the format has no facing glyphs, so
 ``to_ascii`` prints ``@`` whatever the facing). The first text row is the top row, y = 11.

@@ -67,7 +67,7 @@ RECIPE_IDS: tuple[tuple[int, tuple[int, ...], int], ...] = tuple(
 )
 WORKSHOP_OF = {out: WORKSHOPS[w] for out, _, w in RECIPES}  # item name -> workshop kind id
 
-# Glyphs of the ASCII format (DESIGN.md section 3); '@' marks the agent (on an empty cell).
+# Glyphs of the ASCII format (docs/environments.md, Craft); '@' marks the agent (on an empty cell).
 GLYPH_OF_KIND = {
     EMPTY: ".", BOUNDARY: "#", 2: "0", 3: "1", 4: "2", WATER: "~", STONE: "S",
     KIND_ID["iron"]: "i", KIND_ID["grass"]: "g", KIND_ID["wood"]: "w", KIND_ID["rock"]: "r",

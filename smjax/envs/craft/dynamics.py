@@ -1,6 +1,6 @@
 """Craft's transition and reward: pure, branch-free functions of one (unbatched) state.
 
-Rules (ENVIRONMENTS.md section 3):
+Rules (docs/environments.md, Craft):
 
 * A move (DOWN/UP/LEFT/RIGHT) always sets the facing direction and moves one cell if the
   target cell is empty; any occupied cell blocks (the boundary ring keeps the agent inside).

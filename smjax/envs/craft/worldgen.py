@@ -1,6 +1,6 @@
 """World generation, exactly the reference's order, at a cost that fits inside every step.
 
-Order (ENVIRONMENTS.md section 3): for island/cave tasks the treasure at (x0, 1) with x0
+Order (docs/environments.md, Craft): for island/cave tasks the treasure at (x0, 1) with x0
 uniform in 1..10, every empty cell of its 3 x 3 neighbourhood becomes water (gold) or stone
 (gem); then 4 each of iron, grass, wood, rock at uniform free cells, then workshops 0, 1, 2,
 then the agent at a free cell facing DOWN.

@@ -42,7 +42,7 @@ from smjax.envs.fetch.state import FetchParams, FetchState
 
 GAIN = 15.0
 DEAD_BAND = 0.02
-#: Termination tests of ENVIRONMENTS.md: reached, placed (by pick), released.
+#: Termination tests (docs/environments.md, Fetch): reached, placed (by pick), released.
 REACH_TOL = 0.03
 PLACE_TOL = 0.03
 RELEASE_HEIGHT = 0.05

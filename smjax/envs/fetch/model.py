@@ -1,6 +1,6 @@
 """The Fetch & Stack scene as MJCF built in code, for N = 1..6 blocks.
 
-Geometry follows the reference (ENVIRONMENTS.md section 4): a table whose top is at
+Geometry follows the reference (docs/environments.md, Fetch): a table whose top is at
 z = 0.4 (box at (1.3, 0.75, 0.2), half-size (0.25, 0.35, 0.2)), 5 cm blocks of mass 2
 with free joints, and a gripper that starts at ~(1.3419, 0.7491, 0.555).
 

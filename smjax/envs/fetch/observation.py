@@ -1,7 +1,7 @@
 """Observation (10 + 15N floats) and the incremental stacking reward.
 
-Observation layout, as in ENVIRONMENTS.md section 4 (velocities are displacements per
-env step, i.e. velocity x control dt, as in the reference):
+Observation layout, the reference's (docs/environments.md, Fetch); velocities are
+displacements per env step, i.e. velocity x control dt, as in the reference:
 
   [0:3]  grip point position          [3:5]  finger openings (qpos)
   [5:8]  grip point velocity * dt      [8:10] finger velocities * dt

@@ -3,7 +3,7 @@
 Level 1 (task ``stack``): ``place_i`` for every block i, plus ``noop``.
 Level 2 (task ``place_i``): ``reach_i``, ``pick_i``, ``release_i``, plus ``noop``.
 All templates are realised by the scripted controllers of ``controllers.py`` (the
-environment cannot teleport). Termination tests (ENVIRONMENTS.md section 4):
+environment cannot teleport). Termination tests (docs/environments.md, Fetch):
 
 =============  =====================================================  =====  ==========
 template       satisfied (F_o)                                        k_max  initiation
