@@ -88,7 +88,7 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
 
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
-    for environments you define yourself. Returns the results dict (DESIGN.md section 6);
+    for environments you define yourself. Returns the results dict (docs/guide.md section 5);
     with ``out_dir`` also writes results.json, curves.csv, curves.png and checkpoints
     there. With several processes (``smjax.train.distributed.initialize`` called first,
     every process running this same call) they train together and only process 0 reads
