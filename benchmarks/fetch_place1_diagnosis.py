@@ -82,7 +82,7 @@ def main() -> None:
           f"{success / max(finished, 1):.3f} over {finished} episodes", flush=True)
 
     # The whole hierarchy: root + learned place_0, place_1/place_2 scripted.
-    out = engine.evaluate(jax.random.split(jax.random.PRNGKey(4), 1), raw["bank"], learned, fresh)
+    out, _ = engine.evaluate(jax.random.split(jax.random.PRNGKey(4), 1), raw["bank"], learned, fresh)
     print("root + learned place_0, scripted place_1/2:", {k: float(v[0]) for k, v in out.items()})
 
 
