@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 import smjax  # noqa: F401  (sets the XLA:CPU workaround before jax starts)
-from smjax.cli import _key_values
+from smjax.cli_train import key_values as _key_values
 from smjax.train import TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.run import run

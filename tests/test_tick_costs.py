@@ -70,13 +70,6 @@ def test_reset_pool_hands_out_each_start_once_before_reusing():
     assert int(refilled.pool.next) == 0
 
 
-def test_a_run_with_the_pool_trains_and_keeps_the_results_contract():
-    cfg = TrainConfig(num_envs=16, rollout_ticks=8, updates_per_chunk=2, max_episodes_per_level=200,
-                      success_window=16, gate_envs=16, eval_envs=16, reset_pool=16)
-    res = __import__("smjax.train.run", fromlist=["run"]).run(make_keydoor(), cfg, [0], progress=False)
-    assert sum(res["levels"][0]["episodes"]) > 0 and len(res["final_success"]) == 1
-
-
 def _engine(threshold_cfg: TrainConfig) -> tuple[Engine, SeedState]:
     env, params = make_keydoor()
     h = env.hierarchies()["paper"]
