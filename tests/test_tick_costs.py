@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from hier_env import KeyDoor, make_keydoor
 from smjax.agents import make_agent
-from smjax.options.runner import NO_OPTION, Controls, HierarchyRunner
+from smjax.options.runner import Controls, HierarchyRunner
 from smjax.train.config import TrainConfig
 from smjax.train.engine import Engine, SeedState
 

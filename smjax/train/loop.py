@@ -85,6 +85,7 @@ def running_success(history: list, window: int) -> float:
 
 # a seed's bookkeeping for the level it is in (host state, checkpointed), and its start values
 LEVEL_COUNTERS = {"episodes": 0, "env_steps": 0, "history": None, "running": None,
+                  "reached": False,
                   "gate_success": None, "gate_attempts": 0, "gate_env_steps": 0, "gate_next": 0}
 
 
@@ -173,7 +174,7 @@ class HierarchyTrainer:
             "started": [False] * S,  # the seed's current level has been set up
             "levels": [_level_record(p, S) for p in plans], "curves": [],
             "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": 0,
-            "reached": [False] * S, **{k: [v] * S for k, v in LEVEL_COUNTERS.items()},
+            **{k: [v] * S for k, v in LEVEL_COUNTERS.items()},
         }
         self.host["history"] = [[] for _ in range(S)]
         self._compiled = None
@@ -339,7 +340,6 @@ class HierarchyTrainer:
         for s in seeds:
             for k, v in LEVEL_COUNTERS.items():
                 self.host[k][s] = [] if k == "history" else v
-            self.host["reached"][s] = False
             self.host["started"][s] = True
 
     def _mask(self, seeds: list[int]) -> jax.Array:
