@@ -45,7 +45,7 @@ def main() -> None:
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    summary, rows = [], ["task,method,seed,level,template,episodes,env_steps,avg_return"]
+    summary, rows = [], ["task,method,seed,level,template,episodes,env_steps,running_success"]
     table = ["| task | method | episodes to 0.8 (mean +- std, reached) | env steps | final_success (no teleports) "
              "| wall s | compile s | paper (option templates) | paper (curriculum) |", "|---|---|---|---|---|---|---|---|---|"]
     for task in args.tasks:

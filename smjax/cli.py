@@ -68,6 +68,12 @@ def _add_train(sub):
     p.add_argument("--max-steps", type=int, default=None,
                    help="env-step budget per level (0: none); per-template budgets and thresholds: "
                         "--set 'levels={\"attack\": {\"max_steps_per_level\": 1500000}}'")
+    p.add_argument("--finetune", choices=("on", "off", "auto"), default=None,
+                   help="after the levels, fine-tune the learned hierarchy without teleports until "
+                        "its task success passes --set finetune_threshold (0.9) (default auto: on "
+                        "for top-down; docs/guide.md, 'Fine-tuning')")
+    p.add_argument("--finetune-episodes", type=int, default=None, metavar="N",
+                   help="fine-tuning's episode budget per seed (default 20000)")
     p.add_argument("--fixed-map", action="store_true", help="Craft: one fixed map per run (the paper's setting)")
     p.add_argument("--tensorboard", action="store_true", help="also write TensorBoard event files to OUT/tensorboard")
     p.add_argument("--overwrite", action="store_true",

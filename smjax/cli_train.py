@@ -131,7 +131,8 @@ def build_config(args, saved: dict | None):
     for field, value in (("method", args.method), ("algo", args.algo), ("hierarchy", args.hierarchy),
                          ("num_envs", args.num_envs), ("threshold", args.threshold),
                          ("max_episodes_per_level", args.max_episodes),
-                         ("max_steps_per_level", args.max_steps)):
+                         ("max_steps_per_level", args.max_steps), ("finetune", args.finetune),
+                         ("finetune_max_episodes", args.finetune_episodes)):
         if value is not None:
             data[field] = value
     if args.tensorboard:

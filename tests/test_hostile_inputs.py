@@ -35,7 +35,8 @@ from smjax.train.outdir import LOCK_NAME, DirLock, OutDirError, prepare_out_dir
 from smjax.train.run import run
 
 TINY = dict(num_envs=8, rollout_ticks=8, updates_per_chunk=2, max_episodes_per_level=300,
-            success_window=32, gate_envs=8, eval_envs=8, checkpoint_every=0.0)
+            success_window=32, gate_envs=8, eval_envs=8, checkpoint_every=0.0,
+            finetune_max_episodes=100, finetune_turn_episodes=50)
 SCRIPT = """
 import sys
 sys.path.insert(0, {tests!r})

@@ -120,7 +120,8 @@ from smjax.train.run import run
 events = collections.Counter()
 jax.monitoring.register_event_listener(lambda name, **kw: events.update([name.split("/")[-1]]))
 cfg = TrainConfig(num_envs=8, rollout_ticks=4, updates_per_chunk=1, max_episodes_per_level=8,
-                  success_window=4, gate=False, eval_envs=8, eval_max_ticks=20)
+                  success_window=4, gate=False, eval_envs=8, eval_max_ticks=20,
+                  finetune_max_episodes=8)
 run(make_keydoor(), cfg, [0], progress=False)
 print(json.dumps({"hits": events["cache_hits"], "misses": events["cache_misses"]}))
 """

@@ -10,7 +10,8 @@ from smjax.train.run import run
 from smjax.train.results import CURVE_COLUMNS
 
 SMALL = dict(num_envs=32, rollout_ticks=16, updates_per_chunk=4, max_episodes_per_level=4000,
-             success_window=64, eval_envs=64)
+             success_window=64, eval_envs=64, finetune_max_episodes=400,
+             finetune_turn_episodes=200)
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 
 from smjax.agents import config as checks
@@ -146,4 +147,9 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
                        grad_steps=new_state.grad_steps)
         return new_state, metrics
 
-    return Agent("actor-critic", init, act, update, policy_logits)
+    def warm_start(state: PolicyGradientState, params) -> PolicyGradientState:
+        # exploration at the end of its decay, as the trained policy left it
+        seen = jnp.asarray(np.iinfo(np.int32).max // 2, jnp.int32)
+        return state.replace(params=params, episodes_seen=seen)
+
+    return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start)

@@ -18,6 +18,11 @@ An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over
   to carry into the next rollout (``smjax.agents.smdp.carry_pending``)
 * ``policy_logits(params, obs[B]) -> logits[B, A]`` (greedy scores for a frozen policy
   in the policy bank: actor logits for policy-gradient learners, Q-values for DQN)
+* ``frozen_policy``: how a frozen copy acts by default, "sample" (from the logits, for a
+  stochastic policy) or "greedy" (argmax, for value-based learners whose scores are not
+  a distribution)
+* ``warm_start(state, params) -> state``: a fresh state that continues from trained
+  ``params`` (fine-tuning); exploration schedules start where they ended
 """
 from __future__ import annotations
 
@@ -52,3 +57,5 @@ class Agent(NamedTuple):
     act: Callable[..., ActOutput]
     update: Callable[..., tuple[Any, dict]]
     policy_logits: Callable[[Any, jax.Array], jax.Array]
+    frozen_policy: str = "sample"
+    warm_start: Callable[[Any, Any], Any] = lambda state, params: state.replace(params=params)

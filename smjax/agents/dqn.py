@@ -255,4 +255,10 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
     def policy_logits(params, obs: jax.Array) -> jax.Array:
         return q_values(params, obs)
 
-    return Agent("dqn", init, act, update, policy_logits)
+    def warm_start(state: DQNState, params) -> DQNState:
+        # the target starts equal to the trained net; exploration at its final epsilon
+        seen = jnp.asarray(config.epsilon_decay_steps, jnp.int32)
+        return state.replace(params=params, target_params=params, decisions_seen=seen,
+                             grad_steps=jnp.maximum(state.grad_steps, seen))
+
+    return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start)

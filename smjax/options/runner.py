@@ -50,6 +50,7 @@ class EnvCarry:
     stack: ExecutionStack
     learner_started: jax.Array  # bool: the learner has acted in this episode
     learner_return: jax.Array   # float: learner reward collected in this episode
+    task_return: jax.Array      # float: environment reward collected in this episode
     pending: Transition         # the learner's decision still running at the last rollout end
     pool: "ResetPool | None" = None  # pre-generated episode starts (None: reset in every tick)
 
@@ -80,6 +81,8 @@ class EpisodeEnds:
     ret: jax.Array       # float: that episode's learner return (0 where not finished)
     success: jax.Array   # float: that episode's success (0 where not finished)
     decided: jax.Array   # bool: the learner decided in this tick
+    task_end: jax.Array  # bool: a whole-task episode (root at the bottom) ended naturally
+    task_success: jax.Array  # float: that episode's task success (0 where not ended)
 
 
 @struct.dataclass
@@ -91,6 +94,8 @@ class TickStats:
     learner_return: jax.Array
     learner_success: jax.Array
     learner_decisions: jax.Array
+    task_episodes: jax.Array
+    task_success: jax.Array
 
     @staticmethod
     def of(ends: EpisodeEnds) -> "TickStats":
@@ -100,6 +105,8 @@ class TickStats:
             learner_return=ends.ret.sum(-1),
             learner_success=ends.success.sum(-1),
             learner_decisions=ends.decided.sum(-1).astype(jnp.int32),
+            task_episodes=ends.task_end.sum(-1).astype(jnp.int32),
+            task_success=ends.task_success.sum(-1),
         )
 
 
@@ -113,12 +120,18 @@ class Controls:
     learned: bool [num_options], options whose frozen policy is in the bank.
     teleport: bool, unlearned templates may be teleported (None: as the runner was built;
       False turns a teleporting runner into an evaluating one without another compile).
+    continue_episodes: bool, the environment goes on when the learner's option ends (None:
+      as the runner was built); its next episode starts where the levels above call it again.
+    temperature: float, how frozen policies pick: 0 greedy (argmax), else a sample at this
+      temperature (None: as the runner was built).
     """
 
     learner: jax.Array
     start: jax.Array
     learned: jax.Array
     teleport: jax.Array | None = None
+    continue_episodes: jax.Array | None = None
+    temperature: jax.Array | None = None
 
 
 class HierarchyRunner:
@@ -207,7 +220,8 @@ class HierarchyRunner:
         stack = jax.vmap(lambda _: stack_init(self.D, controls.start))(jnp.arange(num_envs))
         zeros_b = jnp.zeros((num_envs,), bool)
         pool = self._new_pool(k_pool) if self.reset_pool else None
-        return EnvCarry(state, obs, stack, zeros_b, jnp.zeros((num_envs,), jnp.float32),
+        zeros_f = jnp.zeros((num_envs,), jnp.float32)
+        return EnvCarry(state, obs, stack, zeros_b, zeros_f, zeros_f,
                         no_pending(obs, self.h.num_actions), pool)
 
     def _fresh_starts(self, key: jax.Array, n: int):
@@ -287,7 +301,7 @@ class HierarchyRunner:
             act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
         logits = self.frozen_logits(bank_params, carry.obs, controls)             # [O, B, A]
         logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
-        frozen = self._frozen_pick(logits, k_frozen)
+        frozen = self._frozen_pick(logits, k_frozen, controls)
         frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)                     # [B, O]
 
         stack, primitive, teleported, scripted, decided = jax.vmap(
@@ -327,9 +341,8 @@ class HierarchyRunner:
         stack = jax.vmap(stack_truncate)(stack, first_end)
 
         env_done = terminated | truncated
-        reset = env_done | (first_end == 0)
-        if self.reset_on_learner_end:
-            reset = reset | learner_ended
+        task_end = env_done | (first_end == 0)
+        reset = task_end | (learner_ended & self.resets_on_learner_end(controls))
         is_root = controls.learner <= 0
         learner_reward = jnp.where(
             is_root, reward.astype(jnp.float32),
@@ -340,6 +353,7 @@ class HierarchyRunner:
         # In evaluation (no learner) the whole episode counts, with the environment's reward.
         started = carry.learner_started | decided | (controls.learner < 0)
         ep_return = carry.learner_return + jnp.where(started, learner_reward, 0.0)
+        task_return = carry.task_return + reward.astype(jnp.float32)
         # The learner's episode is one run of its option: it ends with the environment's
         # episode or when the option ends (the same tick unless episodes continue).
         learner_done = reset | learner_ended
@@ -353,6 +367,7 @@ class HierarchyRunner:
             stack=jax.vmap(select_tree)(reset, fresh, stack),
             learner_started=started & ~learner_done,
             learner_return=jnp.where(learner_done, 0.0, ep_return),
+            task_return=jnp.where(reset, 0.0, task_return),
             pending=carry.pending,  # the engine updates it once per rollout (carry_pending)
             pool=pool,
         )
@@ -365,13 +380,17 @@ class HierarchyRunner:
         # learner; for the root, the environment's info["success"] where it reports one
         # (e.g. Fetch's fraction of blocks placed), else the episode return.
         if "success" in info:
-            root_success = jnp.asarray(info["success"], jnp.float32)
-            success = jnp.where(is_root, root_success, ep_return)
+            task_success = jnp.asarray(info["success"], jnp.float32)
+            success = jnp.where(is_root, task_success, ep_return)
         else:
-            success = ep_return
+            task_success, success = task_return, ep_return
+        # A whole-task episode counts where the root is at the bottom of the stack and the
+        # episode ended by itself (not cut because a learner's option ended).
+        task_end = task_end & (controls.start == 0)
         ends = EpisodeEnds(
             reset=reset, finished=finished, ret=jnp.where(finished, ep_return, 0.0),
             success=jnp.where(finished, success, 0.0), decided=decided,
+            task_end=task_end, task_success=jnp.where(task_end, task_success, 0.0),
         )
         return new_carry, transition, ends
 
@@ -384,7 +403,7 @@ class HierarchyRunner:
         shape = jax.eval_shape(own)
         logits = jax.lax.cond(controls.learner >= 0, own,
                               lambda: jnp.zeros(shape.shape, shape.dtype))
-        action = self._frozen_pick(jnp.where(mask, logits, -1e9), key).astype(jnp.int32)
+        action = self._frozen_pick(jnp.where(mask, logits, -1e9), key, controls).astype(jnp.int32)
         zeros = jnp.zeros(action.shape, jnp.float32)
         return ActOutput(action, zeros, zeros)
 
@@ -416,11 +435,28 @@ class HierarchyRunner:
 
         return jax.lax.fori_loop(0, need.sum(), one, out)
 
-    def _frozen_pick(self, logits: jax.Array, key: jax.Array) -> jax.Array:
-        """A frozen policy's choice from masked scores (last axis): argmax or a sample."""
-        if self.frozen_policy == "greedy":
-            return jnp.argmax(logits, -1)
-        return jax.random.categorical(key, logits / self.frozen_temperature, -1)
+    def frozen_temperature_of(self, controls: Controls) -> jax.Array | float:
+        """The temperature frozen policies pick at (0: greedy)."""
+        if controls.temperature is not None:
+            return controls.temperature
+        return 0.0 if self.frozen_policy == "greedy" else self.frozen_temperature
+
+    def resets_on_learner_end(self, controls: Controls) -> jax.Array | bool:
+        """Whether an environment is reset when the learner's option ends."""
+        if controls.continue_episodes is None:
+            return self.reset_on_learner_end
+        return ~controls.continue_episodes
+
+    def _frozen_pick(self, logits: jax.Array, key: jax.Array, controls: Controls) -> jax.Array:
+        """A frozen policy's choice from masked scores (last axis): argmax at temperature 0,
+        else a sample at the temperature."""
+        temperature = self.frozen_temperature_of(controls)
+        if isinstance(temperature, float):  # known when tracing: compute only that pick
+            if temperature == 0.0:
+                return jnp.argmax(logits, -1)
+            return jax.random.categorical(key, logits / temperature, -1)
+        sample = jax.random.categorical(key, logits / jnp.maximum(temperature, 1e-6), -1)
+        return jnp.where(temperature > 0, sample, jnp.argmax(logits, -1))
 
     def _run_family(self, families, key, state, chosen, action, *, controls: bool):
         """Realise the template ``chosen[b]`` (option id, -1 for none) of each environment.

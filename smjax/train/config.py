@@ -10,6 +10,7 @@ from typing import Any
 METHODS = ("top-down", "bottom-up", "flat")
 ALGOS = ("ppo", "dqn", "actor-critic")
 FROZEN_POLICIES = ("auto", "greedy", "sample")
+FINETUNE_CHOICES = ("auto", "on", "off")
 # what ``TrainConfig.levels`` may override per template
 LEVEL_FIELDS = ("threshold", "max_episodes_per_level", "max_steps_per_level", "success_window")
 
@@ -71,6 +72,21 @@ class TrainConfig:
         learned yet and a wide first layer is the tick's largest cost), "all" (the whole
         bank in one batched apply: cheaper on a GPU, where launches cost more than FLOPs),
         "auto" (learned on a CPU, all elsewhere). The results are the same either way.
+      finetune: after the levels, fine-tune the learned hierarchy without teleports:
+        "on", "off", or "auto" (on for top-down, the method whose levels learn with
+        teleports above and below them). Every learned option in turn (top-down, then
+        round again) keeps learning, warm-started from its frozen policy, in whole-task
+        episodes of the learned hierarchy alone (scripted leaf controllers still run),
+        on its own decisions with its own reward; the others act frozen. A turn ends
+        when the option's own running success reaches ``finetune_option_threshold`` or
+        after ``finetune_turn_episodes``; the phase ends when the teleport-free task
+        success passes a gate at ``finetune_threshold`` or after
+        ``finetune_max_episodes`` (docs/guide.md, "Fine-tuning").
+      finetune_threshold: the teleport-free task success the phase stops at.
+      finetune_option_threshold: an option's running success (where the learned
+        hierarchy calls it) that ends its turn early.
+      finetune_turn_episodes: environment episodes of one option's turn at most.
+      finetune_max_episodes: the phase's budget in environment episodes, per seed.
       checkpoint_every: seconds between checkpoints when an output directory is given
         (0: after every chunk); a checkpoint is also written at the end of every level.
     """
@@ -96,6 +112,11 @@ class TrainConfig:
     eval_max_ticks: int = 2000
     reset_pool: int | None = None
     frozen_eval: str = "auto"
+    finetune: str = "auto"
+    finetune_threshold: float = 0.9
+    finetune_option_threshold: float = 0.95
+    finetune_turn_episodes: int = 2_000
+    finetune_max_episodes: int = 20_000
     checkpoint_every: float = 60.0
     tensorboard: bool = False
     agent: dict = field(default_factory=dict)
@@ -114,7 +135,8 @@ class TrainConfig:
         need(self.hierarchy is None or isinstance(self.hierarchy, str), "hierarchy", "a name or None")
         for name in ("num_envs", "rollout_ticks", "updates_per_chunk", "success_window",
                      "max_episodes_per_level", "eval_envs", "eval_max_ticks", "gate_envs",
-                     "gate_max_ticks", "gate_interval"):
+                     "gate_max_ticks", "gate_interval", "finetune_turn_episodes",
+                     "finetune_max_episodes"):
             value = getattr(self, name)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, name,
                  "an integer >= 1")
@@ -126,6 +148,11 @@ class TrainConfig:
              "one of ('auto', 'learned', 'all')")
         need(isinstance(self.threshold, (int, float)) and 0 < self.threshold <= 1, "threshold",
              "in (0, 1]")
+        need(self.finetune in FINETUNE_CHOICES, "finetune", f"one of {FINETUNE_CHOICES}")
+        for name in ("finetune_threshold", "finetune_option_threshold"):
+            value = getattr(self, name)
+            need(isinstance(value, (int, float)) and not isinstance(value, bool)
+                 and 0 < value <= 1, name, "in (0, 1]")
         need(isinstance(self.gamma, (int, float)) and 0 < self.gamma <= 1, "gamma", "in (0, 1]")
         need(self.frozen_policy in FROZEN_POLICIES, "frozen_policy", f"one of {FROZEN_POLICIES}")
         need(isinstance(self.checkpoint_every, (int, float)) and self.checkpoint_every >= 0,
@@ -149,6 +176,11 @@ class TrainConfig:
                 raise ConfigError(f"config field 'levels' for template {name!r}: unknown field(s) "
                                   f"{unknown}; per-level fields: {list(LEVEL_FIELDS)}")
             dataclasses.replace(self, levels={}, **fields)  # validates the override values
+
+    @property
+    def finetune_on(self) -> bool:
+        """Whether the fine-tuning phase runs ("auto": for top-down)."""
+        return self.finetune == "on" or (self.finetune == "auto" and self.method == "top-down")
 
     @property
     def pool_size(self) -> int:

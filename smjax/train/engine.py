@@ -48,10 +48,14 @@ class SeedState(NamedTuple):
     key: jax.Array
 
 
-def frozen_mode(cfg: TrainConfig) -> str:
-    if cfg.frozen_policy != "auto":
-        return cfg.frozen_policy
-    return "greedy" if cfg.algo == "dqn" else "sample"
+def frozen_mode(cfg: TrainConfig, agent) -> str:
+    """How frozen policies act: the config's choice, else what the learner declares."""
+    return agent.frozen_policy if cfg.frozen_policy == "auto" else cfg.frozen_policy
+
+
+# the frozen-policy modes final_success is measured under (temperature; 0 = argmax):
+# results.json reports every one (final_success_by_policy)
+EVAL_TEMPERATURES = {"greedy": 0.0, "sample": 1.0, "sample_t0.5": 0.5}
 
 
 class Engine:
@@ -59,7 +63,8 @@ class Engine:
 
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, cfg: TrainConfig):
         self.env, self.env_params, self.h, self.agent, self.cfg = env, env_params, hierarchy, agent, cfg
-        mode = frozen_mode(cfg)
+        mode = frozen_mode(cfg, agent)
+        self.frozen_policy = mode
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                       frozen_policy=mode, allow_teleport=True,
                                       reset_on_learner_end=not cfg.continue_episodes,
@@ -75,14 +80,15 @@ class Engine:
         obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
         self.example_obs = obs
         self.num_actions = hierarchy.num_actions
-        # every argument has a seed axis: each seed trains its own level
+        # every argument has a seed axis: each seed trains its own level (or fine-tunes)
         self.chunk = jax.jit(jax.vmap(self._chunk), donate_argnums=(0,))
         self.episodes = jax.jit(
             jax.vmap(self._first_episodes,
-                     in_axes=(0, 0, 0, 0, 0, 0, None, None, 0, 0, None)),
-            static_argnums=(10,))
+                     in_axes=(0, 0, 0, 0, 0, 0, None, None, None, 0, 0, None)),
+            static_argnums=(11,))
         self._compiled_episodes: dict[tuple, Any] = {}
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
+        self._warm = jax.jit(jax.vmap(agent.warm_start))
         self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
 
     # ---- state -----------------------------------------------------------------
@@ -96,6 +102,10 @@ class Engine:
         """
         states = [self._init_one(k) for k in keys]
         return jax.tree.map(lambda *xs: jnp.stack(xs), *states)
+
+    def warm_start(self, states, params):
+        """Learner states (leading axis S) that continue from trained ``params``."""
+        return self._warm(states, params)
 
     def _reset(self, key: jax.Array, start: jax.Array) -> EnvCarry:
         controls = Controls(jnp.asarray(NO_OPTION), start, jnp.zeros((self.h.num_options,), bool))
@@ -111,8 +121,12 @@ class Engine:
         return jax.tree.map(lambda b, p: b.at[:, option].set(p), bank, params)
 
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
-    def _chunk(self, state: SeedState, active, bank, learned, learner, start):
-        controls = Controls(learner, start, learned)
+    def _chunk(self, state: SeedState, active, bank, learned, learner, start, teleport,
+               continue_episodes):
+        """``teleport``/``continue_episodes``: the levels' setting (teleports on, episodes
+        reset with the learner's option unless ``TrainConfig.continue_episodes``) or
+        fine-tuning's (the learned hierarchy alone, whole task episodes)."""
+        controls = Controls(learner, start, learned, teleport, continue_episodes)
         runner, agent, cfg = self.runner, self.agent, self.cfg
 
         def update_step(st: SeedState, _):
@@ -142,7 +156,7 @@ class Engine:
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
     def _first_episodes(self, key, learner_state, bank, learned, learner, start, teleport,
-                        max_ticks, skip, decide, num_envs: int) -> dict:
+                        temperature, max_ticks, skip, decide, num_envs: int) -> dict:
         """Run ``num_envs`` environments until each has finished one learner episode (or
         ``max_ticks``); each environment's first episode counts, so short episodes are not
         over-represented, and one still unfinished at ``max_ticks`` counts as a failure.
@@ -154,9 +168,10 @@ class Engine:
         alone reach ``pass_at``, or even all unfinished ones succeeding could not reach
         ``fail_below``, the answer is certain and the episodes stop (``on``): the same
         decision, fewer ticks. The success then reported is the mean so far (unfinished
-        episodes count 0), which lies on the same side of the threshold."""
+        episodes count 0), which lies on the same side of the threshold.
+        ``temperature``: how frozen policies (and the learner) pick, 0 = greedy."""
         runner = self.episode_runner
-        controls = Controls(learner, start, learned, teleport)
+        controls = Controls(learner, start, learned, teleport, temperature=temperature)
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
         on, pass_at, fail_below = decide
@@ -196,14 +211,26 @@ class Engine:
             compile_s = time.perf_counter() - t0
         return self._compiled_episodes[sig](*args), compile_s
 
-    def evaluate(self, keys, bank, learned, learner_state, place=_same) -> tuple[dict, float]:
+    def evaluate(self, keys, bank, learned, learner_state, place=_same, *,
+                 policy: str | None = None, due: list[bool] | None = None,
+                 threshold: float | None = None) -> tuple[dict, float]:
         """The trained hierarchy alone (root on the stack, no teleports, nobody learning),
-        ``eval_envs`` episodes per seed. ``place`` puts the small per-call inputs where the
-        caller's mesh needs them (every input must be global across processes)."""
+        ``eval_envs`` episodes per seed. ``policy``: how frozen policies pick ("greedy",
+        "sample"; None: the run's frozen policy). ``due``: the seeds to evaluate (others
+        are skipped, their results meaningless). ``threshold``: stop a seed's episodes once
+        reaching it or not is certain (a gate; needs task successes in [0, 1]). ``place``
+        puts the small per-call inputs where the caller's mesh needs them (every input
+        must be global across processes)."""
         S = keys.shape[0]
+        policy = self.frozen_policy if policy is None else policy
+        if policy not in EVAL_TEMPERATURES:
+            raise ValueError(f"policy must be one of {tuple(EVAL_TEMPERATURES)}, got {policy!r}")
+        due = [True] * S if due is None else due
+        bounded = threshold is not None and self.env.success_in_unit_interval
         per_seed = place((jnp.full((S,), NO_OPTION, jnp.int32), jnp.zeros((S,), jnp.int32),
-                          jnp.zeros((S,), bool), _decide([None] * S)))
-        flags = place((jnp.asarray(False), jnp.asarray(self.cfg.eval_max_ticks)))
+                          ~jnp.asarray(due, bool), _decide([threshold if bounded else None] * S)))
+        flags = place((jnp.asarray(False), jnp.asarray(EVAL_TEMPERATURES[policy], jnp.float32),
+                       jnp.asarray(self.cfg.eval_max_ticks)))
         learner, start, skip, decide = per_seed
         args = (keys, learner_state, bank, learned, learner, start) + flags + (skip, decide)
         return self._run_episodes(args, self.cfg.eval_envs)
@@ -219,7 +246,9 @@ class Engine:
         decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
         per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
                           ~jnp.asarray(due, bool), decide))
-        flags = place((jnp.asarray(True), jnp.asarray(self.cfg.gate_max_ticks)))
+        temperature = EVAL_TEMPERATURES[self.frozen_policy]
+        flags = place((jnp.asarray(True), jnp.asarray(temperature, jnp.float32),
+                       jnp.asarray(self.cfg.gate_max_ticks)))
         learner, start, skip, decide = per_seed
         args = (keys, state.learner, bank, learned, learner, start) + flags + (skip, decide)
         return self._run_episodes(args, self.cfg.gate_envs)

@@ -25,9 +25,11 @@ import numpy as np
 
 from smjax.options.hierarchy import Hierarchy
 from smjax.train import checkpoint as ckpt
+from smjax.train import finetune as ft
+from smjax.train.seed_arrays import all_finite, fold_in, freeze, local, select_seeds, split_seeds
 from smjax.train import distributed as dist
 from smjax.train.config import TrainConfig
-from smjax.train.engine import Engine, SeedState
+from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
 from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
 
@@ -98,56 +100,7 @@ def _level_record(plan: LevelPlan, num_seeds: int) -> dict:
                 "gate_success", "gate_attempts", "gate_env_steps")}}
 
 
-def _split_seeds(keys: jax.Array, n: int) -> list[jax.Array]:
-    split = jax.vmap(lambda k: jax.random.split(k, n))(keys)
-    return [split[:, i] for i in range(n)]
-
-
-@jax.jit
-def _fold_in(keys: jax.Array, data: jax.Array) -> jax.Array:
-    return jax.vmap(jax.random.fold_in, (0, None))(keys, data)
-
-
-@jax.jit
-def _select_seeds(mask: jax.Array, new, old):
-    """Per seed (leading axis), ``new`` where ``mask`` else ``old``."""
-    def pick(a, b):
-        return jnp.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), a, b)
-    return jax.tree.map(pick, new, old)
-
-
-@jax.jit
-def _freeze(mask: jax.Array, options: jax.Array, params, bank, learned):
-    """Store each masked seed's learner params in its bank at its option; mark it learned."""
-    rows = jnp.arange(mask.shape[0])
-
-    def store(b, p):
-        keep = b[rows, options]
-        return b.at[rows, options].set(jnp.where(mask.reshape((-1,) + (1,) * (p.ndim - 1)), p, keep))
-
-    learned = learned.at[rows, options].set(learned[rows, options] | mask)
-    return jax.tree.map(store, bank, params), learned
-
-
-@jax.jit
-def _finite_flags(tree) -> jax.Array:
-    flags = [jnp.isfinite(x).all() for x in jax.tree.leaves(tree)
-             if jnp.issubdtype(x.dtype, jnp.floating)]
-    return jnp.stack(flags).all() if flags else jnp.asarray(True)
-
-
-def _all_finite(tree) -> bool:
-    # one compiled reduction, read through ``gather`` so every process sees the same answer
-    return bool(dist.gather(_finite_flags(tree)))
-
-
-def _local(x: jax.Array) -> jax.Array:
-    """``x`` as an array this process holds whole (host-side derivations such as key
-    splits and learner inits work on it; they are then placed on the mesh again)."""
-    return x if x.is_fully_addressable else jnp.asarray(dist.gather(x))
-
-
-class HierarchyTrainer:
+class HierarchyTrainer(ft.FinetunePhase):
     """Trains every planned level for all seeds, each seed at its own pace; resumable."""
 
     def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
@@ -155,13 +108,16 @@ class HierarchyTrainer:
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
         self.cfg = engine.cfg
         self.cfg.check_level_names([p.name for p in plans])
+        # after the levels, a seed fine-tunes (one stage more) unless it is off
+        self.ft_order = plan_levels(engine.h, "top-down") if self.cfg.finetune_on else []
+        self.num_stages = len(plans) + bool(self.ft_order)
         self.out_dir = out_dir
         self.writer = dist.is_writer()  # process 0: the only one that writes files or draws bars
         self.progress = progress and self.writer
         self.run_meta = run_meta or {}
         S = len(self.seeds)
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
-        keys, k_init, k_reset = _split_seeds(keys, 3)
+        keys, k_init, k_reset = split_seeds(keys, 3)
         learner = engine.init_learner(k_init)
         self.arrays = {
             "keys": keys,
@@ -170,9 +126,11 @@ class HierarchyTrainer:
             "learned": jnp.zeros((S, engine.h.num_options), bool),
         }
         self.host: dict[str, Any] = {
-            "stage": [0] * S,  # index of the plan each seed trains (len(plans): done)
+            # the plan each seed trains; len(plans): fine-tuning; num_stages: done
+            "stage": [0] * S,
             "started": [False] * S,  # the seed's current level has been set up
             "levels": [_level_record(p, S) for p in plans], "curves": [],
+            "finetune": ft.new_record(S),
             "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": 0,
             **{k: [v] * S for k, v in LEVEL_COUNTERS.items()},
         }
@@ -223,10 +181,10 @@ class HierarchyTrainer:
         info = ckpt.shared_meta(self.out_dir) if self.out_dir is not None else None
         if info is None:
             return False
-        if "stage" not in info["meta"]["host"]:
+        if "finetune" not in info["meta"]["host"]:
             raise ckpt.CheckpointError(
                 f"the checkpoint in {ckpt.checkpoint_dir(self.out_dir)} was written by an older "
-                f"smjax whose seeds trained levels in lockstep; it cannot be resumed by this one")
+                f"smjax (before the fine-tuning phase); it cannot be resumed by this one")
         if dist.is_multiprocess():
             like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), self.arrays)
             loaded = ckpt.load_arrays(self.out_dir, like) if self.writer else like
@@ -241,39 +199,51 @@ class HierarchyTrainer:
     def run(self) -> dict:
         t_start = time.perf_counter() - self.host["wall_seconds"]
         self._start_levels([s for s, done in enumerate(self.host["started"]) if not done
-                            and self.host["stage"][s] < len(self.plans)])
+                            and self.host["stage"][s] < self.num_stages])
         bar = Progress(self) if self.progress else None
         while self._training():
             t0 = time.perf_counter()
             stats = self._chunk()
             dt = time.perf_counter() - t0
-            candidates = self._account(stats)
+            candidates, task_candidates = self._account(stats)
             self.host["chunks"] += 1
             passed = self._accept(candidates)
-            ended = [s for s in self._training()
-                     if s in passed or self._budget_spent(self._level_cfg(s), s)]
+            task_passed = self._accept_task(task_candidates)
+            ended = [s for s in self._training() if not self._finetuning(s)
+                     and (s in passed or self._budget_spent(self._level_cfg(s), s))]
             for s in passed:
                 self.host["reached"][s] = True
+            phase_ended, turn_ended = self._finetune_ends(task_passed)
             self.host["wall_seconds"] = time.perf_counter() - t_start
-            if ended:
+            if ended or phase_ended or turn_ended:
                 self._finish_levels(ended)
+                self._finish_turns(turn_ended + phase_ended, phase_ended)
                 # start the next levels before checkpointing: the checkpoint then holds their
                 # fresh learners (an empty replay buffer compresses to nothing), not the
                 # finished ones
-                self._start_levels([s for s in ended if self.host["stage"][s] < len(self.plans)])
+                self._start_levels([s for s in ended + turn_ended
+                                    if self.host["stage"][s] < self.num_stages])
             if bar is not None:
                 bar.draw(dt)
-            if self.out_dir is not None and (ended or self._save_due()):
+            if self.out_dir is not None and (ended or phase_ended or turn_ended
+                                             or self._save_due()):
                 self.save()
         if bar is not None:
             bar.close()
         return self._evaluate(t_start)
 
     def _training(self) -> list[int]:
-        """Seeds that still have a level to train."""
-        return [s for s, i in enumerate(self.host["stage"]) if i < len(self.plans)]
+        """Seeds that still have a level to train (or are fine-tuning)."""
+        return [s for s, i in enumerate(self.host["stage"]) if i < self.num_stages]
+
+    def _finetuning(self, s: int) -> bool:
+        return bool(self.ft_order) and self.host["stage"][s] == len(self.plans)
 
     def _plan(self, s: int) -> LevelPlan:
+        """The level a seed trains, or the option whose turn it is in fine-tuning."""
+        if self._finetuning(s):
+            turn = self.host["finetune"]["turn"][s]
+            return self.ft_order[turn % len(self.ft_order)]
         return self.plans[min(self.host["stage"][s], len(self.plans) - 1)]
 
     def _level_cfg(self, s: int) -> TrainConfig:
@@ -285,18 +255,23 @@ class HierarchyTrainer:
     def _chunk(self):
         """One compiled chunk for every seed at its own level; returns its stats [S, U]."""
         host = self.host
-        active = self._per_seed([i < len(self.plans) for i in host["stage"]], bool)
-        learner = self._per_seed([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
-        start = self._per_seed([self._plan(s).start for s in range(len(self.seeds))], jnp.int32)
+        S = len(self.seeds)
+        active = self._per_seed([i < self.num_stages for i in host["stage"]], bool)
+        learner = self._per_seed([self._plan(s).option for s in range(S)], jnp.int32)
+        start = self._per_seed([self._plan(s).start for s in range(S)], jnp.int32)
+        # levels: teleports on; fine-tuning: the learned hierarchy alone, whole episodes
+        tuning = [self._finetuning(s) for s in range(S)]
+        teleport = self._per_seed([not t for t in tuning], bool)
+        keep = self._per_seed([t or self.cfg.continue_episodes for t in tuning], bool)
         args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
-                learner, start)
+                learner, start, teleport, keep)
         if self._compiled is None:  # one compile serves every level (ids are traced)
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()
             host["compile_seconds"] += time.perf_counter() - t0
         state, stats, _ = self._compiled(*args)
         stats = dist.gather(stats)  # [S, U], the same on every process
-        if not _all_finite(state.learner.params):
+        if not all_finite(state.learner.params):
             where = ", ".join(f"seed {self.seeds[s]} level {self._plan(s).level} "
                               f"({self._plan(s).name})" for s in self._training())
             raise NonFiniteError(f"non-finite learner parameters in chunk {host['chunks']} "
@@ -305,35 +280,48 @@ class HierarchyTrainer:
         return stats
 
     def _evaluate(self, t_start: float) -> dict:
-        keys, k_eval = _split_seeds(_local(self.arrays["keys"]), 2)
+        keys, k_eval = split_seeds(local(self.arrays["keys"]), 2)
         if self.mesh is not None:
             k_eval = dist.place(k_eval, seed_sharding(self.mesh, k_eval))
-        final, compile_s = self.engine.evaluate(k_eval, self.arrays["bank"], self.arrays["learned"],
-                                                self.arrays["state"].learner,
-                                                place=self._place_small)
-        self.host["compile_seconds"] += compile_s
-        final = dist.gather(final)
+        # under the run's frozen policy (final_success), then under every other mode
+        by_policy = {}
+        for policy in [self.engine.frozen_policy] + [
+                p for p in EVAL_TEMPERATURES if p != self.engine.frozen_policy]:
+            result, compile_s = self.engine.evaluate(
+                k_eval, self.arrays["bank"], self.arrays["learned"], self.arrays["state"].learner,
+                place=self._place_small, policy=policy)
+            self.host["compile_seconds"] += compile_s
+            by_policy[policy] = dist.gather(result)
         self.host["wall_seconds"] = time.perf_counter() - t_start
         if self._tb is not None:
             self._tb.close()
-        return {"levels": self.host["levels"], "curves": self.host["curves"], "final": final,
+        return {"levels": self.host["levels"], "curves": self.host["curves"],
+                "final": by_policy[self.engine.frozen_policy], "final_by_policy": by_policy,
+                "eval_policy": self.engine.frozen_policy,
+                "finetune": self.host["finetune"] if self.ft_order else None,
                 "bank": self.arrays["bank"], "learned": self.arrays["learned"],
                 "wall_seconds": self.host["wall_seconds"],
                 "compile_seconds": self.host["compile_seconds"]}
 
     def _start_levels(self, seeds: list[int]) -> None:
-        """Fresh learners, keys and environments for these seeds' next level (each seed's
-        keys split exactly as if it trained alone)."""
+        """Fresh learners, keys and environments for these seeds' next level or fine-tuning
+        turn (each seed's keys split exactly as if it trained alone); a turn's learner
+        continues from its option's frozen policy."""
         if not seeds:
             return
         # computed for every seed and selected, so that every call has the same shapes
         # (one compile per run, however many seeds start at once)
-        arrays = jax.tree.map(_local, self.arrays)
-        keys, k_init, k_reset, k_run = _split_seeds(arrays["keys"], 4)
+        arrays = jax.tree.map(local, self.arrays)
+        keys, k_init, k_reset, k_run = split_seeds(arrays["keys"], 4)
         starts = jnp.asarray([self._plan(s).start for s in range(len(self.seeds))], jnp.int32)
-        fresh = SeedState(self.engine.reset(k_reset, starts), self.engine.init_learner(k_init),
-                          k_run)
-        arrays["keys"], arrays["state"] = _select_seeds(
+        learner = self.engine.init_learner(k_init)
+        tuning = [s for s in seeds if self._finetuning(s)]
+        if tuning:
+            options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
+            warm = self.engine.warm_start(learner, ft.bank_rows(arrays["bank"], options))
+            learner = select_seeds(self._mask(tuning), warm, learner)
+        fresh = SeedState(self.engine.reset(k_reset, starts), learner, k_run)
+        arrays["keys"], arrays["state"] = select_seeds(
             self._mask(seeds), (keys, fresh), (arrays["keys"], arrays["state"]))
         self.arrays = arrays
         self._place()
@@ -350,12 +338,14 @@ class HierarchyTrainer:
         # clocks differ between processes, and saving is collective: process 0 decides
         return dist.agree(due) if self.cfg.checkpoint_every > 0 else due
 
-    def _account(self, stats) -> list[int]:
+    def _account(self, stats) -> tuple[list[int], list[int]]:
         """Count a chunk's episodes and steps; the seeds whose running success reached the
-        threshold."""
+        threshold (levels), and the fine-tuning seeds whose task success reached theirs."""
         host = self.host
         steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
         candidates = []
+        task_candidates = [s for s in self._training() if self._finetuning(s)
+                           and self._account_task(stats, s)]
         for s in self._training():
             plan, cfg, seed = self._plan(s), self._level_cfg(s), self.seeds[s]
             for u in range(cfg.updates_per_chunk):
@@ -366,8 +356,9 @@ class HierarchyTrainer:
                     host["history"][s].append([float(stats.learner_success[s, u]), n])
                 run = running_success(host["history"][s], cfg.success_window)
                 host["running"][s] = None if math.isnan(run) else run
-                host["curves"].append([seed, plan.level, plan.name, host["episodes"][s],
-                                       host["env_steps"][s], host["running"][s]])
+                if not self._finetuning(s):  # (fine-tuning records the task's curve)
+                    host["curves"].append([seed, plan.level, plan.name, host["episodes"][s],
+                                           host["env_steps"][s], host["running"][s]])
                 if self._tb is not None and host["running"][s] is not None:
                     tag = f"seed_{seed}/level_{plan.level}_{plan.name}"
                     self._tb.add_scalar(f"{tag}/running_success", host["running"][s],
@@ -381,9 +372,9 @@ class HierarchyTrainer:
                     break
             host["history"][s] = hist[len(hist) - keep:]
             run = host["running"][s]
-            if run is not None and run >= cfg.threshold:
+            if run is not None and run >= cfg.threshold and not self._finetuning(s):
                 candidates.append(s)
-        return candidates
+        return candidates, task_candidates
 
     def _budget_spent(self, cfg: TrainConfig, s: int) -> bool:
         host = self.host
@@ -404,7 +395,7 @@ class HierarchyTrainer:
             return []
         S = len(self.seeds)
         # the attempt number varies the gate's episodes between attempts, deterministically
-        keys = _fold_in(self.arrays["keys"], jnp.asarray(host["chunks"], jnp.uint32))
+        keys = fold_in(self.arrays["keys"], jnp.asarray(host["chunks"], jnp.uint32))
         plans = [self._plan(s) for s in range(S)]
         # one vmapped call for all seeds; those not due are skipped (their results unused)
         result, compile_s = self.engine.gate(
@@ -429,10 +420,12 @@ class HierarchyTrainer:
 
     def _finish_levels(self, seeds: list[int]) -> None:
         """Freeze these seeds' learners into the bank and record their levels."""
+        if not seeds:
+            return
         host = self.host
         options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
-        arrays = jax.tree.map(_local, self.arrays)
-        arrays["bank"], arrays["learned"] = _freeze(
+        arrays = jax.tree.map(local, self.arrays)
+        arrays["bank"], arrays["learned"] = freeze(
             self._mask(seeds), options, arrays["state"].learner.params, arrays["bank"],
             arrays["learned"])
         self.arrays = arrays
@@ -446,3 +439,4 @@ class HierarchyTrainer:
                 record[name][s] = host[key][s]
             host["stage"][s] += 1
             host["started"][s] = False
+        self._evaluate_before([s for s in seeds if self._finetuning(s)])

@@ -16,9 +16,11 @@ class Progress:
 
         self.trainer = trainer
         seeds, levels = len(trainer.seeds), len(trainer.plans)
+        stages = trainer.num_stages  # the levels, and fine-tuning where it runs
         done = int(sum(trainer.host["stage"]))
-        self.bar = tqdm(total=seeds * levels, initial=done, unit="level", leave=True,
-                        desc=f"{seeds} seed{'s' * (seeds > 1)} x {levels} level{'s' * (levels > 1)}")
+        what = f"{levels} level{'s' * (levels > 1)}" + (" + fine-tune" if stages > levels else "")
+        self.bar = tqdm(total=seeds * stages, initial=done, unit="stage", leave=True,
+                        desc=f"{seeds} seed{'s' * (seeds > 1)} x {what}")
 
     def draw(self, chunk_seconds: float) -> None:
         trainer, host = self.trainer, self.trainer.host
@@ -26,10 +28,16 @@ class Progress:
         training = trainer._training()
         steps = cfg.updates_per_chunk * cfg.num_envs * cfg.rollout_ticks * len(training)
         self.bar.n = int(sum(host["stage"]))
-        at = [trainer._plan(s).level for s in training]
-        extra = {"at": " ".join(f"L{lvl}x{at.count(lvl)}" for lvl in sorted(set(at)))} if at else {}
-        runs = [host["running"][s] for s in training if host["running"][s] is not None]
-        gates = [host["gate_success"][s] for s in training if host["gate_success"][s] is not None]
+        at = [f"L{trainer._plan(s).level}" if not trainer._finetuning(s) else "FT"
+              for s in training]
+        extra = {"at": " ".join(f"{a}x{at.count(a)}" for a in sorted(set(at)))} if at else {}
+        levels = [s for s in training if not trainer._finetuning(s)]
+        runs = [host["running"][s] for s in levels if host["running"][s] is not None]
+        gates = [host["gate_success"][s] for s in levels if host["gate_success"][s] is not None]
+        tasks = [host["finetune"]["task_running"][s] for s in training
+                 if trainer._finetuning(s) and host["finetune"]["task_running"][s] is not None]
+        if tasks:  # fine-tuning: the teleport-free task success
+            extra["task"] = f"{np.mean(tasks):.2f}"
         if runs:
             extra["success"] = f"{np.mean(runs):.2f}"
         if gates:

@@ -13,7 +13,11 @@ import jax
 
 import smjax
 
-CURVE_COLUMNS = ("seed", "level", "template", "episodes", "env_steps", "avg_return")
+# running_success: the mean success over the last success_window learner episodes (the
+# level's learner; in fine-tuning, whole-task episodes). Files written before it had this
+# name call the column "avg_return"; ``read_curves`` renames it.
+CURVE_COLUMNS = ("seed", "level", "template", "episodes", "env_steps", "running_success")
+OLD_NAMES = {"avg_return": "running_success"}
 
 
 def _clean(x: Any) -> Any:
@@ -83,6 +87,7 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
         per_seed_eps.append(sum(rec["episodes"][s] for rec in levels) if ok else None)
         per_seed_steps.append(sum(rec["env_steps"][s] for rec in levels) if ok else None)
     final = raw["final"]
+    by_policy = raw.get("final_by_policy") or {}
     return _clean({
         "env": env,
         "task": task,
@@ -94,7 +99,15 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
         "env_steps_to_threshold": per_seed_steps,
         "final_success": [float(x) for x in final["success"]],
         "final_return": [float(x) for x in final["return"]],
+        # how frozen policies picked in the evaluation behind final_success, and the
+        # success under every mode
+        "eval_policy": raw.get("eval_policy"),
+        "final_success_by_policy": {p: [float(x) for x in r["success"]]
+                                    for p, r in by_policy.items()},
         "levels": [dict(r) for r in levels],
+        "finetune": _finetune_summary(raw.get("finetune"), config),
+        "total_episodes": _totals(levels, raw.get("finetune"), "episodes", len(seeds)),
+        "total_env_steps": _totals(levels, raw.get("finetune"), "env_steps", len(seeds)),
         "wall_seconds": raw["wall_seconds"],
         "compile_seconds": raw["compile_seconds"],
         "device": jax.devices()[0].platform,
@@ -102,6 +115,34 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
         "smjax_version": smjax.__version__,
         "config": config,
     })
+
+
+def _finetune_summary(record: dict | None, config: dict) -> dict | None:
+    """results.json's "finetune": per seed, the phase's training episodes and env steps,
+    its gate env steps, whether its gate passed, final_success before it, its turns."""
+    if record is None:
+        return None
+    return {
+        "threshold": config.get("finetune_threshold"),
+        "episodes": list(record["episodes"]),
+        "env_steps": list(record["env_steps"]),
+        "gate_env_steps": list(record["gate_env_steps"]),
+        "gate_attempts": list(record["gate_attempts"]),
+        "gate_success": list(record["gate_success"]),
+        "reached": list(record["reached"]),
+        "task_running_success": list(record["task_running"]),
+        "final_success_before": list(record["success_before"]),
+        "turns": [list(t) for t in record["turns"]],
+    }
+
+
+def _totals(levels: list, finetune: dict | None, key: str, num_seeds: int) -> list:
+    """Per seed, the training episodes (or env steps) of every level and fine-tuning."""
+    out = []
+    for s in range(num_seeds):
+        total = sum(rec[key][s] or 0 for rec in levels)
+        out.append(total + (finetune[key][s] if finetune is not None else 0))
+    return out
 
 
 def write_results(out_dir: str | Path, results: dict, curves: list[tuple]) -> None:
@@ -120,5 +161,7 @@ def write_results(out_dir: str | Path, results: dict, curves: list[tuple]) -> No
 
 
 def read_curves(path: str | Path) -> list[dict]:
+    """curves.csv rows as dicts (old column names renamed)."""
     with open(path, newline="") as f:
-        return list(csv.DictReader(f))
+        rows = list(csv.DictReader(f))
+    return [{OLD_NAMES.get(k, k): v for k, v in row.items()} for row in rows]

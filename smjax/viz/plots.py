@@ -1,4 +1,6 @@
-"""Learning-curve plots in the paper's style: average reward vs episodes, one panel per level."""
+"""Learning-curve plots in the paper's style: running success vs episodes, one panel per
+level, and one for fine-tuning (the task's teleport-free success, with the evaluated
+final_success before and after it)."""
 from __future__ import annotations
 
 import csv
@@ -37,10 +39,26 @@ def check_curves(run_dir: Path) -> None:
     for i, r in enumerate(rows, start=2):
         try:
             int(r["level"]), int(r["seed"]), int(r["episodes"])
-            if r["avg_return"] not in ("", None):
-                float(r["avg_return"])
+            if r["running_success"] not in ("", None):
+                float(r["running_success"])
         except (TypeError, ValueError):
             raise ValueError(f"{path} line {i} is malformed: {r}") from None
+
+
+FINETUNE = "finetune"  # the template column of fine-tuning's rows
+
+
+def _before_after(ax, meta: dict, color) -> None:
+    """Fine-tuning's panel: the evaluated final_success before it (dotted) and after it
+    (dashed), means over seeds."""
+    ft = meta.get("finetune") or {}
+    before = [x for x in ft.get("final_success_before") or [] if x is not None]
+    after = [x for x in meta.get("final_success") or [] if x is not None]
+    if before:
+        ax.axhline(np.mean(before), color=color, ls=":", lw=1,
+                   label=f"before: {np.mean(before):.2f}")
+    if after:
+        ax.axhline(np.mean(after), color=color, ls="--", lw=1, label=f"after: {np.mean(after):.2f}")
 
 
 def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
@@ -55,17 +73,19 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
     import matplotlib.pyplot as plt
 
     runs = [(Path(d), *_load(Path(d))) for d in run_dirs]
-    levels = sorted({(int(r["level"]), r["template"]) for _, rows, _ in runs for r in rows})
+    # fine-tuning's panel last (runs with and without it can be overlaid)
+    levels = sorted({(int(r["level"]), r["template"]) for _, rows, _ in runs for r in rows},
+                    key=lambda k: (k[1] == FINETUNE, k))
     n = max(1, len(levels))
     fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.4), squeeze=False)
     for d, rows, meta in runs:
         label = f"{meta.get('method', d.name)} ({meta.get('algo', '?')})"
         by_level = defaultdict(lambda: defaultdict(list))
         for r in rows:
-            if r["avg_return"] == "":
+            if r["running_success"] == "":
                 continue
             by_level[(int(r["level"]), r["template"])][int(r["seed"])].append(
-                (int(r["episodes"]), float(r["avg_return"])))
+                (int(r["episodes"]), float(r["running_success"])))
         for ax, key in zip(axes[0], levels):
             seeds = by_level.get(key)
             if not seeds:
@@ -82,10 +102,13 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
                 mean, std = np.nanmean(ys, 0), np.nanstd(ys, 0)
             line, = ax.plot(grid, mean, label=label)
             ax.fill_between(grid, mean - std, mean + std, alpha=0.2, color=line.get_color())
+            if key[1] == FINETUNE:
+                _before_after(ax, meta, line.get_color())
     for ax, (level, template) in zip(axes[0], levels):
-        ax.set_title(f"level {level}: {template}")
+        finetune = template == FINETUNE
+        ax.set_title("fine-tuning, no teleports" if finetune else f"level {level}: {template}")
         ax.set_xlabel("episodes")
-        ax.set_ylabel("average reward")
+        ax.set_ylabel("task success" if finetune else "running success")
         ax.grid(alpha=0.3)
         if not ax.lines:
             ax.text(0.5, 0.5, "no complete success window yet", ha="center", va="center",
@@ -96,6 +119,9 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
             break
+    for ax, (_, template) in zip(axes[0], levels):  # fine-tuning's before/after lines
+        if template == FINETUNE and ax.get_legend() is None and ax.lines:
+            ax.legend(fontsize=7)
     if title:
         fig.suptitle(title)
     fig.tight_layout()

@@ -1,0 +1,170 @@
+"""Fine-tuning: after the levels, the learned hierarchy keeps learning without teleports."""
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hier_env import KeyDoor, make_keydoor
+from smjax.agents import make_agent
+from smjax.train import ConfigError, TrainConfig
+from smjax.train import checkpoint as ckpt
+from smjax.train.loop import HierarchyTrainer
+from smjax.train.run import run
+from smjax.train.seed_arrays import freeze
+
+CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
+           success_window=64, gate_envs=64, eval_envs=64, finetune_max_episodes=1500,
+           finetune_turn_episodes=500)
+
+
+class FarTeleport(KeyDoor):
+    """``give_key``'s teleport also carries the agent to the cell left of the door, while
+    a learned ``give_key`` leaves it at the key: a root trained with the teleport learns
+    "call give_key, step right, USE" and fails once the teleport is gone, unless it
+    learns, without teleports, to walk to the door."""
+
+    name = "test/keydoor_far_teleport"
+
+    def templates(self):
+        out = super().templates()
+
+        def beside_the_door(key, state, params):  # then LEFT: one cell left of the door
+            return state.replace(pos=state.door_pos, has_key=True), jnp.asarray(0)
+
+        out["give_key"] = dataclasses.replace(out["give_key"], teleport=beside_the_door)
+        return out
+
+
+def _strip_timing(res: dict) -> dict:
+    return {k: v for k, v in res.items() if k not in ("wall_seconds", "compile_seconds", "_raw")}
+
+
+@pytest.fixture(scope="module")
+def far_teleport_run():
+    env = FarTeleport()
+    return run((env, env.default_params), TrainConfig(**CFG), [0, 1], progress=False)
+
+
+def test_finetuning_fixes_what_the_teleport_hid(far_teleport_run):
+    res = far_teleport_run
+    before = np.array(res["finetune"]["final_success_before"])
+    after = np.array(res["final_success"])
+    assert all(r for rec in res["levels"] for r in rec["reached"])  # the levels did learn
+    assert before.mean() < 0.6, before  # with the teleport gone the levels' root fails
+    assert after.mean() >= before.mean() + 0.3, (before, after)
+
+
+def test_results_keep_the_contract(far_teleport_run):
+    res = far_teleport_run
+    ft = res["finetune"]
+    for key in ("episodes", "env_steps", "gate_env_steps", "reached", "final_success_before",
+                "turns", "task_running_success"):
+        assert len(ft[key]) == 2, key
+    for s in range(2):
+        levels = sum(rec["episodes"][s] for rec in res["levels"])
+        assert res["episodes_to_threshold"][s] == levels  # the paper's count: levels only
+        assert res["total_episodes"][s] == levels + ft["episodes"][s]
+        assert 0 < ft["episodes"][s] <= CFG["finetune_max_episodes"] + 16 * 16 * 2
+        # turns go top-down and round again: the root, give_key, the root, ...
+        names = [t["template"] for t in ft["turns"][s]]
+        assert names[:2] == ["open_door", "give_key"][:len(names[:2])]
+        assert all(t["episodes"] <= CFG["finetune_turn_episodes"] + 16 * 16 * 2
+                   for t in ft["turns"][s])
+    assert res["eval_policy"] == "sample"
+    assert set(res["final_success_by_policy"]) == {"greedy", "sample", "sample_t0.5"}
+    assert res["final_success_by_policy"]["sample"] == res["final_success"]
+
+
+def test_finetune_off_and_bad_values():
+    assert TrainConfig().finetune_on and not TrainConfig(method="flat").finetune_on
+    assert TrainConfig(method="flat", finetune="on").finetune_on
+    assert not TrainConfig(finetune="off").finetune_on
+    for field, value in (("finetune", "maybe"), ("finetune_threshold", 0.0),
+                         ("finetune_option_threshold", 1.5), ("finetune_max_episodes", 0),
+                         ("finetune_turn_episodes", -3)):
+        with pytest.raises(ConfigError, match=field):
+            TrainConfig(**{field: value})
+
+
+SMALL = dict(num_envs=8, rollout_ticks=8, updates_per_chunk=2, success_window=32, gate_envs=16,
+             eval_envs=16, max_episodes_per_level=150, finetune_max_episodes=240,
+             finetune_turn_episodes=80)
+
+
+def test_without_finetuning_the_counts_are_the_levels():
+    cfg = TrainConfig(**(SMALL | {"finetune": "off"}))
+    res = run(make_keydoor(), cfg, [0], progress=False)
+    assert res["finetune"] is None
+    assert res["total_episodes"] == [sum(rec["episodes"][0] for rec in res["levels"])]
+
+
+class _MachineLost(Exception):
+    pass
+
+
+def test_resume_during_finetuning_is_exact(tmp_path, monkeypatch):
+    # checkpoints at level and turn boundaries only (a save per chunk is slow)
+    cfg = TrainConfig(**(SMALL | {"checkpoint_every": 1e9}))
+    straight = run(make_keydoor(), cfg, [0, 1], tmp_path / "straight", progress=False)
+    save = HierarchyTrainer.save
+
+    def save_then_lose_the_machine(trainer):
+        save(trainer)
+        if any(trainer._finetuning(s) and trainer.host["finetune"]["turn"][s] >= 1
+               for s in range(len(trainer.seeds))):
+            raise _MachineLost  # in the second turn of a seed's fine-tuning
+
+    monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
+    out = tmp_path / "moved"
+    with pytest.raises(_MachineLost):
+        run(make_keydoor(), cfg, [0, 1], out, progress=False)
+    monkeypatch.undo()
+    assert any(t >= 1 for t in ckpt.load_meta(out)["meta"]["host"]["finetune"]["turn"])
+    resumed = run(make_keydoor(), cfg, [0, 1], out, progress=False, resume=True)
+    assert _strip_timing(resumed) == _strip_timing(straight)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(1, 4), st.integers(2, 5), st.data())
+def test_a_turn_writes_only_its_own_option_of_its_own_seed(num_seeds, num_options, data):
+    mask = np.array(data.draw(st.lists(st.booleans(), min_size=num_seeds, max_size=num_seeds)))
+    options = np.array(data.draw(st.lists(st.integers(0, num_options - 1), min_size=num_seeds,
+                                          max_size=num_seeds)), np.int32)
+    bank = {"w": jnp.arange(num_seeds * num_options * 3, dtype=jnp.float32)
+            .reshape(num_seeds, num_options, 3)}
+    params = {"w": -jnp.ones((num_seeds, 3))}
+    learned = jnp.zeros((num_seeds, num_options), bool)
+    new_bank, new_learned = freeze(jnp.asarray(mask), jnp.asarray(options), params, bank, learned)
+    changed = np.asarray((new_bank["w"] != bank["w"]).any(-1))
+    expected = np.zeros((num_seeds, num_options), bool)
+    expected[np.arange(num_seeds), options] = mask
+    np.testing.assert_array_equal(changed, expected)
+    np.testing.assert_array_equal(np.asarray(new_learned), expected)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "dqn", "actor-critic"])
+def test_warm_start_continues_from_the_trained_params(algo):
+    agent = make_agent(algo)
+    obs = jnp.zeros((5,))
+    fresh = agent.init(jax.random.PRNGKey(0), obs, 3)
+    trained = agent.init(jax.random.PRNGKey(1), obs, 3).params
+    warm = agent.warm_start(fresh, trained)
+    same = jax.tree.map(lambda a, b: bool((a == b).all()), warm.params, trained)
+    assert all(jax.tree.leaves(same))
+    if algo == "dqn":  # the target net starts equal to the trained one
+        assert all(jax.tree.leaves(jax.tree.map(lambda a, b: bool((a == b).all()),
+                                                warm.target_params, trained)))
+    # exploration starts where its schedule ended (ppo has none: it samples its policy)
+    if algo == "dqn":  # epsilon 0.05: the greedy action almost always
+        batch = jnp.zeros((256, 5))
+        acts = agent.act(warm, batch, jnp.ones((256, 3), bool), jax.random.PRNGKey(2)).action
+        greedy = jnp.argmax(agent.policy_logits(trained, batch), -1)
+        assert float((acts == greedy).mean()) > 0.9
+    if algo == "actor-critic":
+        from smjax.agents.actor_critic import ActorCriticConfig, exploration_epsilon
+
+        assert float(exploration_epsilon(ActorCriticConfig(), warm.episodes_seen)) < 1e-6
