@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.train import distributed as dist
-from smjax.train.seed_arrays import fold_in, freeze, local
+from smjax.train.seed_arrays import fold_in, freeze
 
 # a seed's fine-tuning bookkeeping (host state, checkpointed), and its start values
 FINETUNE_COUNTERS: dict[str, Any] = {
@@ -72,6 +72,17 @@ def append_window(history: list, total: float, count: int, window: int) -> float
             break
     del history[:len(history) - keep]
     return total / seen if seen >= window else None
+
+
+def record_gate(counters: dict, s: int, result: dict, next_chunk: int) -> float:
+    """Count seed ``s``'s gate attempt (``result``: the episodes program's, gathered) in its
+    ``gate_*`` counters; its success."""
+    success = float(result["success"][s])
+    counters["gate_success"][s] = success
+    counters["gate_attempts"][s] += 1
+    counters["gate_env_steps"][s] += int(result["env_steps"][s])
+    counters["gate_next"][s] = next_chunk
+    return success
 
 
 @jax.jit
@@ -138,16 +149,8 @@ class FinetunePhase:
             due=[s in due for s in range(S)], threshold=cfg.finetune_threshold)
         host["compile_seconds"] += compile_s
         result = dist.gather(result)
-        passed = []
-        for s in due:
-            success = float(result["success"][s])
-            rec["gate_success"][s] = success
-            rec["gate_attempts"][s] += 1
-            rec["gate_env_steps"][s] += int(result["env_steps"][s])
-            rec["gate_next"][s] = host["chunks"] + cfg.gate_interval
-            if success >= cfg.finetune_threshold:
-                passed.append(s)
-        return passed
+        return [s for s in due if record_gate(rec, s, result, host["chunks"] + cfg.gate_interval)
+                >= cfg.finetune_threshold]
 
     def _finetune_ends(self, passed: list[int]) -> tuple[list[int], list[int]]:
         """(seeds whose phase ends: passed or out of budget, seeds whose turn ends)."""
@@ -170,13 +173,7 @@ class FinetunePhase:
         if not seeds:
             return
         host, rec = self.host, self.host["finetune"]
-        options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
-        arrays = jax.tree.map(local, self.arrays)
-        arrays["bank"], arrays["learned"] = freeze(
-            self._mask(seeds), options, arrays["state"].learner.params, arrays["bank"],
-            arrays["learned"])
-        self.arrays = arrays
-        self._place()
+        self._freeze_learners(seeds)
         for s in seeds:
             rec["turns"][s].append({"template": self._plan(s).name,
                                     "episodes": host["episodes"][s],

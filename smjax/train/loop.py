@@ -406,11 +406,8 @@ class HierarchyTrainer(ft.FinetunePhase):
         result = dist.gather(result)
         passed = []
         for s in due:
-            success = float(result["success"][s])
-            host["gate_success"][s] = success
-            host["gate_attempts"][s] += 1
-            host["gate_env_steps"][s] += int(result["env_steps"][s])
-            host["gate_next"][s] = host["chunks"] + self._level_cfg(s).gate_interval
+            success = ft.record_gate(host, s, result,
+                                     host["chunks"] + self._level_cfg(s).gate_interval)
             if self._tb is not None:
                 tag = f"seed_{self.seeds[s]}/level_{plans[s].level}_{plans[s].name}"
                 self._tb.add_scalar(f"{tag}/gate_success", success, host["env_steps"][s])
@@ -418,11 +415,8 @@ class HierarchyTrainer(ft.FinetunePhase):
                 passed.append(s)
         return passed
 
-    def _finish_levels(self, seeds: list[int]) -> None:
-        """Freeze these seeds' learners into the bank and record their levels."""
-        if not seeds:
-            return
-        host = self.host
+    def _freeze_learners(self, seeds: list[int]) -> None:
+        """Store these seeds' learner params in their banks at the option they train."""
         options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
         arrays = jax.tree.map(local, self.arrays)
         arrays["bank"], arrays["learned"] = freeze(
@@ -430,6 +424,13 @@ class HierarchyTrainer(ft.FinetunePhase):
             arrays["learned"])
         self.arrays = arrays
         self._place()
+
+    def _finish_levels(self, seeds: list[int]) -> None:
+        """Freeze these seeds' learners into the bank and record their levels."""
+        if not seeds:
+            return
+        host = self.host
+        self._freeze_learners(seeds)
         for s in seeds:
             record = host["levels"][host["stage"][s]]
             for name, key in (("episodes", "episodes"), ("env_steps", "env_steps"),
