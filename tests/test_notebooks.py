@@ -38,6 +38,7 @@ _full_run = _smjax_train.run
 
 def _capped_run(task, cfg, *args, **kwargs):
     cfg = cfg.replace(max_episodes_per_level=min(cfg.max_episodes_per_level, {CAP_EPISODES}),
+                      finetune_max_episodes=min(cfg.finetune_max_episodes, {CAP_EPISODES}),
                       gate_envs=min(cfg.gate_envs, {CAP_GATE_ENVS}))
     print({CAPPED!r})
     return _full_run(task, cfg, *args, **kwargs)
