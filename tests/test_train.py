@@ -126,7 +126,7 @@ def test_craft_get_wood_reaches_threshold_on_cpu():
     # PPO learns Craft on the CPU, and final_success below runs the learned policy alone.
     # The gate is examined on the key-door runs above.
     cfg = TrainConfig(num_envs=64, rollout_ticks=32, updates_per_chunk=4, max_episodes_per_level=6000,
-                      eval_envs=128, gate=False)
+                      eval_envs=128, gate=False, finetune="off")
     res = run("craft/get_wood", cfg, [0], progress=False, env_overrides={"observation": "compact"})
     level = res["levels"][0]
     assert level["reached"] == [True] and level["final_running_success"][0] >= 0.8
