@@ -26,8 +26,8 @@ from smjax.train.sharding import training_mesh
 
 TESTS = str(Path(__file__).parent)
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=400,
-           success_window=64, eval_envs=32, finetune_max_episodes=200,
-           finetune_turn_episodes=100)
+           success_window=64, eval_envs=32, finetune="off")
+# (fine-tuning is refused across processes: it deadlocked there, see smjax/train/run.py)
 SCRIPT = """
 import sys
 sys.path.insert(0, {tests!r})

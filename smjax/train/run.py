@@ -101,6 +101,11 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     enable_compilation_cache()  # a second run of the same programs skips compiling
     seeds = validate_seeds(seeds)
     cfg.validate()
+    if cfg.finetune_on and dist.is_multiprocess():
+        # measured: two processes deadlock once a seed starts fine-tuning (tests/test_distributed.py)
+        raise ConfigError("fine-tuning does not run across several processes yet; pass "
+                          "--finetune off (TrainConfig(finetune='off')) for a multi-process run, "
+                          "or fine-tune on one process")
     cfg = cfg.replace(agent=normalize_agent(cfg.algo, cfg.agent))
     env_overrides = dict(env_overrides or {})
     if resume and out_dir is None:
