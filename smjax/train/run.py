@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -71,17 +70,6 @@ def _claim_out_dir(out_dir, resume: bool, overwrite: bool) -> DirLock | None:
     return lock
 
 
-def _warn_unreachable_windows(cfg: TrainConfig, plans) -> None:
-    """A success window longer than the episode budget makes the threshold unreachable."""
-    for plan in plans:
-        level = cfg.for_level(plan.name)
-        if level.success_window > level.max_episodes_per_level:
-            warnings.warn(
-                f"level {plan.name!r}: success_window {level.success_window} exceeds "
-                f"max_episodes_per_level {level.max_episodes_per_level}, so its running success "
-                f"can never reach the threshold; lower success_window", stacklevel=3)
-
-
 def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None = None, *,
         env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
         overwrite: bool = False) -> dict:
@@ -135,7 +123,6 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     hierarchy_name, hierarchy = resolve_hierarchy(env, cfg)
     plans = plan_levels(hierarchy, cfg.method)
     cfg.check_level_names([p.name for p in plans])
-    _warn_unreachable_windows(cfg, plans)
     check_fits(env, env_params, cfg, len(seeds))
     agent = make_agent(cfg.algo, **cfg.agent)
     engine = Engine(env, env_params, hierarchy, agent, cfg)
