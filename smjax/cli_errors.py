@@ -25,7 +25,15 @@ def _first_line(text: str) -> str:
 
 
 def is_out_of_memory(err: BaseException) -> bool:
-    return "RESOURCE_EXHAUSTED" in str(err) or isinstance(err, MemoryError)
+    """XLA's out-of-memory error (RESOURCE_EXHAUSTED ... memory), or Python's. (A full disk
+    is RESOURCE_EXHAUSTED too, in the I/O library's words; it is not this.)"""
+    from smjax.train.checkpoint import CheckpointError
+
+    if isinstance(err, MemoryError):
+        return True
+    text = str(err)
+    return (not isinstance(err, CheckpointError) and "RESOURCE_EXHAUSTED" in text
+            and "memory" in text.lower())
 
 
 def user_message(err: BaseException, batch: str | None = None) -> str | None:

@@ -5,6 +5,7 @@ compiles; ``smjax.cli.main`` turns the errors into one line and exit code 2.
 """
 from __future__ import annotations
 
+import errno
 import json
 import socket
 import sys
@@ -64,8 +65,9 @@ def _probe_coordinator(address: str, process_id: int | None, timeout: float) -> 
     except OSError as err:
         raise UsageError(f"--coordinator {address}: host {host!r} cannot be resolved ({err}); "
                          f"check the address") from None
-    if not process_id:
-        return  # process 0 hosts the coordinator
+    if not process_id:  # process 0 hosts the coordinator: its port must be free here
+        _check_port_free(address, int(port))
+        return
     deadline = time.monotonic() + timeout
     while True:
         try:
@@ -77,6 +79,27 @@ def _probe_coordinator(address: str, process_id: int | None, timeout: float) -> 
                                  f"start process 0 first, check the address, or raise "
                                  f"--coordinator-timeout") from None
             time.sleep(0.5)
+
+
+def _check_port_free(address: str, port: int) -> None:
+    """Process 0's coordinator listens on every address at ``port``; refuse a taken port in
+    one line (JAX would log a C++ error and fail to start its server)."""
+    for family, host in ((socket.AF_INET6, "::"), (socket.AF_INET, "")):
+        try:
+            sock = socket.socket(family, socket.SOCK_STREAM)
+        except OSError:  # no IPv6 on this host: try IPv4
+            continue
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as gRPC binds
+            sock.bind((host, port))
+            return
+        except OSError as err:
+            if err.errno == errno.EADDRINUSE:
+                raise UsageError(f"--coordinator {address}: port {port} is already in use on this "
+                                 f"host, where process 0 starts the coordinator; choose a free "
+                                 f"port or end the program using it") from None
+        finally:
+            sock.close()
 
 
 def initialize_distributed(args) -> None:

@@ -56,7 +56,8 @@ def test_train_resume_render_plot(tmp_path, capsys):
     out = tmp_path / "wood"
     args = ["train", "craft/get_wood", "--seeds", "1", "--num-envs", "16", "--max-episodes", "60",
             "--env", "observation=compact", "--set", "rollout_ticks=8", "--set", "eval_envs=8",
-            "--finetune-episodes", "60", "--out", str(out), "--quiet"]
+            "--finetune-episodes", "60", "--set", "success_window=60", "--set", "gate_envs=8",
+            "--out", str(out), "--quiet"]
     assert main(args) == 0
     summary = json.loads(capsys.readouterr().out.splitlines()[0])
     assert summary["task"] == "get_wood" and summary["method"] == "top-down"

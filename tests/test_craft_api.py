@@ -110,7 +110,7 @@ def test_malformed_ascii_names_row_and_column(text, pattern):
 
 
 def test_inventory_dict():
-    state, _ = from_ascii(REFERENCE_GOLD_MAP)
+    state, _ = from_ascii(REFERENCE_GOLD_MAP, task="get_gold")
     assert inventory_dict(state) == {}
     inv = state.inventory.at[C.KIND_ID["wood"]].set(2).at[C.KIND_ID["axe"]].set(1)
     assert inventory_dict(state.replace(inventory=inv)) == {"wood": 2, "axe": 1}

@@ -18,9 +18,11 @@ from test_craft_reference import py_step
 
 DOWN, UP, LEFT, RIGHT, USE, NOOP = range(6)
 
-# Agent at (5, 5) facing DOWN looks at (5, 4): the cell X below.
-def one_cell_map(glyph: str) -> str:
-    rows = ["############"] + ["#..........#"] * 10 + ["############"]
+# Agent at (5, 5) facing DOWN looks at (5, 4): the cell X below. The task's goal item (a
+# gem by default) sits in the far corner (10, 10), out of every test's one-step reach:
+# from_ascii refuses a get_X map without any X.
+def one_cell_map(glyph: str, corner: str = "E") -> str:
+    rows = ["############", f"#.........{corner}#"] + ["#..........#"] * 9 + ["############"]
     rows[11 - 5] = "#....@.....#"
     rows[11 - 4] = "#...." + glyph + ".....#"
     return "\n".join(rows)
@@ -38,7 +40,9 @@ def with_inventory(state, items: dict[str, int]):
 
 
 def use_on(glyph: str, items: dict[str, int], task: str = "get_gem"):
-    state, params = from_ascii(one_cell_map(glyph), task=task)
+    goal = C.TASKS[task]
+    corner = C.GLYPH_OF_KIND[C.KIND_ID[goal]] if goal in C.PRIMITIVES else "E"
+    state, params = from_ascii(one_cell_map(glyph, corner), task=task)
     state = with_inventory(state, items)
     _, state, reward, term, trunc, _ = STEP(jax.random.PRNGKey(0), state, jnp.int32(USE), params)
     return state, float(reward), bool(term), bool(trunc)

@@ -26,7 +26,7 @@ from smjax.train.sharding import training_mesh
 
 TESTS = str(Path(__file__).parent)
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=400,
-           success_window=64, eval_envs=32, finetune="off")
+           success_window=64, gate_envs=32, eval_envs=32, finetune="off")
 # (fine-tuning is refused across processes: it deadlocked there, see smjax/train/run.py)
 SCRIPT = """
 import sys
@@ -82,6 +82,36 @@ def _results(out: Path) -> dict:
     return {k: v for k, v in json.loads((out / "results.json").read_text()).items() if k not in TIMING}
 
 
+JOIN = """
+import json
+from smjax.train import distributed
+assert distributed.initialize(initialization_timeout=60)
+import jax
+print(json.dumps({"processes": jax.process_count(), "index": jax.process_index(),
+                  "devices": len(jax.devices()),
+                  "agreed": distributed.broadcast_json({"from": jax.process_index()})}))
+"""
+
+
+def test_two_processes_join_and_agree(tmp_path):
+    """The default suite's multi-process check: two processes join through
+    ``distributed.initialize`` (the path the CLI takes) and agree on process 0's value.
+    (Training together, which compiles for minutes: the slow tests below.)"""
+    port, procs = _free_port(), []
+    for i in range(2):
+        env = dict(os.environ, JAX_PLATFORMS="cpu", XLA_FLAGS="--xla_force_host_platform_device_count=2",
+                   **{dist.ENV_COORDINATOR: f"127.0.0.1:{port}", dist.ENV_NUM_PROCESSES: "2",
+                      dist.ENV_PROCESS_ID: str(i)})
+        procs.append(subprocess.Popen([sys.executable, "-c", JOIN], env=env, cwd=tmp_path,
+                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+    for i, proc in enumerate(procs):
+        out, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err[-3000:]
+        assert json.loads(out.strip().splitlines()[-1]) == {
+            "processes": 2, "index": i, "devices": 4, "agreed": {"from": 0}}
+
+
+@pytest.mark.slow  # three processes compile a training run: minutes on a 2-core CI
 def test_two_processes_equal_one_process(tmp_path):
     single = _start(tmp_path / "single", tmp_path / "cwd", 4, CFG)
     _wait([single])

@@ -7,9 +7,11 @@ Training runs here are tiny (the key-door corridor of ``hier_env``, a few chunks
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import signal
+import socket
 import stat
 import subprocess
 import sys
@@ -31,6 +33,7 @@ from smjax.core.overrides import parse_bool, parse_float, parse_int
 from smjax.core.registry import get_entry
 from smjax.train import TrainConfig
 from smjax.train import checkpoint as ckpt
+from smjax.train.config import ConfigError
 from smjax.train.outdir import LOCK_NAME, DirLock, OutDirError, prepare_out_dir
 from smjax.train.run import run
 
@@ -113,8 +116,11 @@ def test_craft_maps_refuse_bad_step_caps_and_tasks():
     with pytest.raises(ValueError, match="unknown craft task"):
         from_ascii(REFERENCE_GEM_MAP, task=["get_gem"])
     no_gem = REFERENCE_GEM_MAP.replace("E", ".")
-    with pytest.warns(UserWarning, match="holds no gem"):
+    with pytest.raises(ValueError, match=r"holds no gem \('E'\): task 'get_gem' can never succeed"):
         from_ascii(no_gem, task="get_gem")
+    with pytest.raises(ValueError, match="holds no wood"):
+        from_ascii(REFERENCE_GEM_MAP.replace("w", "."), task="get_wood")
+    from_ascii(no_gem, task="make_stick")  # a task the map can be for is fine
 
 
 FAMILIES = ("craft/get_wood", "fetch/stack1", "football/11v11_easy")
@@ -161,7 +167,8 @@ def _train(tmp_path, *extra) -> list[str]:
     (None, ".yaml", "does not exist"), ("DIR", ".yaml", "is a directory"),
     ("num_envs: many\n", ".yaml", "num_envs"), ("", ".yaml", "mapping"),
     ("- 1\n- 2\n", ".yaml", "mapping"), ("{bad json", ".json", "cannot be read or parsed"),
-    ("gate: perhaps\n", ".yml", "gate")])
+    ("gate: perhaps\n", ".yml", "gate"),
+    ("success_window: 500\nmax_episodes_per_level: 400\n", ".yaml", "success_window")])
 def test_config_file_errors_are_one_line(tmp_path, capsys, content, suffix, needle):
     path = tmp_path / f"c{suffix}"
     if content == "DIR":
@@ -179,12 +186,69 @@ def test_config_file_errors_are_one_line(tmp_path, capsys, content, suffix, need
     (["--num-envs", "3000000"], "batch too large"), (["--set", "noequals"], "KEY=VALUE"),
     (["--seeds", "0"], "--seeds"), (["--coordinator", "no-such-host.invalid:1234",
                                       "--num-processes", "2", "--process-id", "1",
-                                      "--coordinator-timeout", "1"], "cannot be resolved")])
+                                      "--coordinator-timeout", "1"], "cannot be resolved"),
+    (["--max-episodes", "100"], "'success_window' = 256 exceeds 'max_episodes_per_level' = 100"),
+    (["--set", 'levels={"get_wood": {"max_episodes_per_level": 50}}'],
+     "levels' for template 'get_wood'")])
 def test_bad_flags_are_refused_before_compiling(tmp_path, capsys, extra, needle):
     t0 = time.perf_counter()
     code, err = _cli(_train(tmp_path, *extra), capsys)
     assert code == 2 and needle in err, err
     assert time.perf_counter() - t0 < 15  # no compile happened
+
+
+def test_a_window_longer_than_the_episode_budget_is_refused():
+    """success_window > max_episodes_per_level leaves the threshold unreachable: refused,
+    for the whole run and for one level's overrides, naming both values and the fix."""
+    with pytest.raises(ConfigError, match=r"'success_window' = 300 exceeds "
+                                          r"'max_episodes_per_level' = 200.*lower success_window"):
+        TrainConfig(success_window=300, max_episodes_per_level=200)
+    with pytest.raises(ConfigError, match=r"levels' for template 'give_key'.*= 64 exceeds .* = 10"):
+        TrainConfig(success_window=64, levels={"give_key": {"max_episodes_per_level": 10}})
+    with pytest.raises(ConfigError, match="= 50000 exceeds 'max_episodes_per_level' = 40000"):
+        TrainConfig(success_window=64, levels={"give_key": {"success_window": 50_000}})
+    TrainConfig(success_window=10, max_episodes_per_level=10)  # a window the budget just fills
+    ok = TrainConfig(success_window=64, levels={"give_key": {"max_episodes_per_level": 10,
+                                                              "success_window": 10}})
+    assert ok.for_level("give_key").success_window == 10
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def test_an_unreachable_coordinator_ends_in_one_line_within_its_timeout(tmp_path):
+    """Issue #18 item 9: JAX waited 300 s, then aborted with a C++ stack trace. Now each
+    way of not reaching the run ends with exit code 2 and one line, bounded by
+    --coordinator-timeout: process 0 whose peers never join, a process whose coordinator
+    does not answer, and a coordinator port already taken on process 0's host."""
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    cases = {"alone": ("0", _free_port(), "did not form within 3 s"),
+             "no_answer": ("1", _free_port(), "did not answer within 3 s"),
+             "port_taken": ("0", busy.getsockname()[1], "is already in use on this host")}
+    t0, procs = time.perf_counter(), {}
+    try:
+        for name, (pid, port, _) in cases.items():  # in parallel: each mostly imports JAX
+            procs[name] = subprocess.Popen(
+                [sys.executable, "-m", "smjax", "train", "craft/get_wood", "--quiet", "--out",
+                 str(tmp_path / name), "--coordinator", f"127.0.0.1:{port}", "--num-processes",
+                 "2", "--process-id", pid, "--coordinator-timeout", "3"],
+                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                env=dict(os.environ, JAX_PLATFORMS="cpu"))
+        for name, proc in procs.items():
+            err = proc.communicate(timeout=300)[1]
+            lines = err.strip().splitlines()
+            assert proc.returncode == 2 and len(lines) == 1, (name, err[-3000:])
+            assert cases[name][2] in lines[0] and "--coordinator" in lines[0], (name, lines)
+        assert time.perf_counter() - t0 < 50  # JAX's own wait was 300 s; the flag's default 60
+    finally:
+        busy.close()
+        for proc in procs.values():
+            proc.kill()
 
 
 def test_bad_output_paths_are_refused_before_compiling(tmp_path, capsys):
@@ -271,7 +335,8 @@ def test_resaving_a_chunk_never_deletes_the_checkpoint_in_force(tmp_path, monkey
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(ocp.StandardCheckpointer, "save", broken_save)
-    with pytest.raises(ckpt.CheckpointError, match="previous checkpoint .* is kept"):
+    with pytest.raises(ckpt.CheckpointError, match="disk full: .*previous checkpoint .* is kept; "
+                                                   "free space, then --resume the run"):
         ckpt.save_checkpoint(tmp_path, 3, _arrays(3.0), _meta())
     monkeypatch.undo()
     assert ckpt.load_meta(tmp_path)["path"] == "step-3.1"
@@ -279,6 +344,20 @@ def test_resaving_a_chunk_never_deletes_the_checkpoint_in_force(tmp_path, monkey
     from smjax.train.results import FILE_MODE  # what open() gives: 0644 under umask 022
 
     assert stat.S_IMODE((tmp_path / "checkpoints" / ckpt.LATEST).stat().st_mode) == FILE_MODE
+
+
+def test_a_full_disk_is_not_reported_as_out_of_memory():
+    """The I/O library calls a full disk RESOURCE_EXHAUSTED, as XLA calls a full device."""
+    from smjax.cli_errors import user_message
+
+    full = ckpt.CheckpointError(ckpt._write_failure(
+        Path("/o/checkpoints/step-2"), Path("/o/checkpoints"),
+        ValueError('RESOURCE_EXHAUSTED: Error writing local file "/o/x": Failed writing: No space '
+                   'left on device')))
+    assert user_message(full, "2 seed(s) x num_envs 16").startswith("disk full: could not write")
+    oom = RuntimeError("RESOURCE_EXHAUSTED: Out of memory while trying to allocate 8.00GiB")
+    assert user_message(oom, "2 seed(s) x num_envs 16").startswith(
+        "out of memory with 2 seed(s) x num_envs 16")
 
 
 @pytest.mark.parametrize("damage, needle", [
@@ -296,18 +375,146 @@ def test_damaged_checkpoints_are_one_line_errors(tmp_path, damage, needle):
     assert "\n" not in str(info.value)
 
 
-@pytest.mark.skipif(ROOT, reason="permissions do not bind root")
-def test_a_read_only_checkpoint_dir_fails_fast(tmp_path):
+def _read_only_errors(monkeypatch, folder: Path) -> None:
+    """Writes into ``folder`` fail as on a read-only file system (EROFS), for root too."""
+    real = Path.write_bytes
+
+    def write_bytes(self, data):
+        if self.resolve().parent == folder.resolve():
+            raise OSError(errno.EROFS, "Read-only file system", str(self))
+        return real(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", write_bytes)
+
+
+@pytest.mark.parametrize("how", ["chmod", "erofs"])
+def test_a_read_only_checkpoint_dir_fails_fast(tmp_path, monkeypatch, how):
+    if how == "chmod" and ROOT:
+        pytest.skip("permissions do not bind root (the erofs case covers it)")
     ckpt.save_checkpoint(tmp_path, 1, _arrays(1.0), _meta())
     d = ckpt.checkpoint_dir(tmp_path)
-    d.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    if how == "chmod":
+        d.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    else:
+        _read_only_errors(monkeypatch, d)
     try:
         t0 = time.perf_counter()
-        with pytest.raises(ckpt.CheckpointError, match="cannot write checkpoints"):
+        with pytest.raises(ckpt.CheckpointError, match="cannot write checkpoints to .*; make it "
+                                                       "writable or choose another --out"):
             ckpt.save_checkpoint(tmp_path, 2, _arrays(2.0), _meta())
         assert time.perf_counter() - t0 < 5
     finally:
         d.chmod(0o755)
+        monkeypatch.undo()
+    assert ckpt.load_meta(tmp_path)["path"] == "step-1"  # the last good checkpoint is kept
+
+
+def test_a_step_directory_orbax_cannot_create_fails_fast_and_quietly(tmp_path, monkeypatch, capfd):
+    """The file system turns read-only (or full) between the write probe and orbax's own
+    directory creation: orbax created it in a background thread whose failure left the
+    writer threads waiting ~300 s. Now the save fails at once, in one error, printing
+    nothing, and no orbax thread outlives it."""
+    ckpt.save_checkpoint(tmp_path, 1, _arrays(1.0), _meta())
+    real_mkdir = os.mkdir
+
+    def mkdir(path, *a, **k):
+        if ".orbax-checkpoint-tmp" in os.fsdecode(path):
+            raise OSError(errno.EROFS, "Read-only file system", os.fsdecode(path))
+        return real_mkdir(path, *a, **k)
+
+    monkeypatch.setattr(os, "mkdir", mkdir)
+    threads = {t.ident for t in threading.enumerate()}
+    capfd.readouterr()
+    t0 = time.perf_counter()
+    with pytest.raises(ckpt.CheckpointError, match="Read-only file system.*previous checkpoint"):
+        ckpt.save_checkpoint(tmp_path, 2, _arrays(2.0), _meta())
+    assert time.perf_counter() - t0 < 10
+    monkeypatch.undo()
+    out, err = capfd.readouterr()
+    assert out == "" and err == "", err[-2000:]
+    left = [t for t in threading.enumerate() if t.ident not in threads and not t.daemon]
+    assert not left, left
+    assert ckpt.load_meta(tmp_path)["path"] == "step-1"
+    np.testing.assert_array_equal(ckpt.load_arrays(tmp_path, _arrays(0.0))["a"], [1, 1, 1])
+
+
+READ_ONLY_RUN = """
+import builtins, errno, io, os, sys, time
+from pathlib import Path
+sys.path.insert(0, {tests!r})
+from hier_env import make_keydoor
+from smjax.cli import main
+from smjax.core.registry import register
+
+checkpoints, marker = Path({out!r}).resolve() / "checkpoints", Path({marker!r})
+_open, _os_open, _mkdir = builtins.open, os.open, os.mkdir
+
+
+def read_only(path) -> bool:
+    \"\"\"Once the first checkpoint is in, the checkpoints folder is read-only (as if its
+    file system were remounted so): every write under it fails with EROFS.\"\"\"
+    try:
+        inside = Path(os.path.abspath(os.fsdecode(path))).is_relative_to(checkpoints)
+    except (TypeError, ValueError):
+        return False
+    if inside and os.path.exists(checkpoints / "latest.json"):
+        if not os.path.exists(marker):
+            with _open(marker, "w") as f:
+                f.write(repr(time.time()))
+        return True
+    return False
+
+
+def erofs(path):
+    return OSError(errno.EROFS, "Read-only file system", os.fsdecode(path))
+
+
+def ro_open(file, mode="r", *a, **k):
+    if isinstance(file, (str, bytes, os.PathLike)) and set(mode) & set("wax+") and read_only(file):
+        raise erofs(file)
+    return _open(file, mode, *a, **k)
+
+
+def ro_os_open(path, flags, *a, **k):
+    if flags & (os.O_WRONLY | os.O_RDWR | os.O_CREAT) and read_only(path):
+        raise erofs(path)
+    return _os_open(path, flags, *a, **k)
+
+
+def ro_mkdir(path, *a, **k):
+    if read_only(path):
+        raise erofs(path)
+    return _mkdir(path, *a, **k)
+
+
+builtins.open = io.open = ro_open
+os.open, os.mkdir = ro_os_open, ro_mkdir
+register("test/keydoor", lambda: make_keydoor())
+sys.exit(main(["train", "test/keydoor", "--seeds", "2", "--out", {out!r}, "--quiet",
+               *[f"--set={{k}}={{v}}" for k, v in {cfg!r}.items()]]))
+"""
+
+
+def test_a_run_whose_checkpoints_turn_read_only_ends_at_once_in_one_line(tmp_path):
+    """Issue #18 item 9 as root: the checkpoints folder turns read-only after the first
+    checkpoint (every write under it fails with EROFS, root or not). The CLI process must
+    end promptly (orbax once hung ~300 s in its threads), with exit code 2, one line naming
+    the folder and the fix, and the first checkpoint still usable."""
+    out, marker = tmp_path / "ro", tmp_path / "first_refusal"
+    cfg = TINY | {"gate": False, "max_episodes_per_level": 120}  # test_latest_never_dangles'
+    code = READ_ONLY_RUN.format(tests=str(Path(__file__).parent), out=str(out),
+                                marker=str(marker), cfg=cfg)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=600, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    ended = time.time()
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert lines[0].startswith("error: cannot write checkpoints to ") and "Read-only file " \
+        "system; make it writable or choose another --out" in lines[0], lines[0]
+    assert ended - float(marker.read_text()) < 30  # ends at once, not after orbax's timeout
+    assert ckpt.load_meta(out) is not None  # the checkpoint written before is intact
+    assert not (out / LOCK_NAME).exists()
 
 
 # ------------------------------------------------------------- plot / render / bench

@@ -7,7 +7,7 @@ from smjax.train import TrainConfig
 from smjax.train.run import run
 
 TINY = dict(algo="dqn", num_envs=4, rollout_ticks=8, updates_per_chunk=1, max_episodes_per_level=2,
-            eval_envs=2, success_window=4, finetune_max_episodes=2,
+            eval_envs=2, success_window=2, finetune_max_episodes=2,
             agent={"learning_starts": 8, "buffer_capacity": 256, "batch_size": 8})
 
 

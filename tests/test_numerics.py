@@ -12,7 +12,7 @@ from smjax.train.loop import NonFiniteError
 from smjax.train.run import run
 
 CFG = dict(num_envs=8, rollout_ticks=8, updates_per_chunk=1, max_episodes_per_level=400,
-           success_window=32, eval_envs=8, checkpoint_every=0.0, finetune="off")
+           success_window=32, gate_envs=8, eval_envs=8, checkpoint_every=0.0, finetune="off")
 
 
 def test_nan_injection_stops_cleanly_and_keeps_last_good_checkpoint(tmp_path, monkeypatch):

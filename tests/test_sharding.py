@@ -13,7 +13,7 @@ from hier_env import make_keydoor
 from smjax.train import TrainConfig
 from smjax.train.run import run
 cfg = TrainConfig(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=400,
-                  success_window=64, eval_envs=32, finetune_max_episodes=200,
+                  success_window=64, gate_envs=32, eval_envs=32, finetune_max_episodes=200,
                   finetune_turn_episodes=100)
 r = run(make_keydoor(), cfg, {seeds!r}, progress=False)
 print(json.dumps({{"devices": len(jax.devices()), "levels": r["levels"], "final": r["final_success"]}}))

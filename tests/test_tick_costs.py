@@ -127,10 +127,24 @@ print(json.dumps({"hits": events["cache_hits"], "misses": events["cache_misses"]
 """
 
 
-def _run_in_subprocess(env_vars: dict) -> dict:
+# the opt-out is a switch of ``enable_compilation_cache`` (what ``run`` calls first): one
+# small program shows it as well as a whole run, without compiling a run's programs again
+_ONE_PROGRAM = """
+import collections, json
+import jax, jax.numpy as jnp
+from smjax.core.compile_cache import enable_compilation_cache
+events = collections.Counter()
+jax.monitoring.register_event_listener(lambda name, **kw: events.update([name.split("/")[-1]]))
+enable_compilation_cache()
+jax.jit(lambda x: jnp.cumsum(x * 2.0 + 1.0))(jnp.arange(5.0)).block_until_ready()
+print(json.dumps({"hits": events["cache_hits"], "misses": events["cache_misses"]}))
+"""
+
+
+def _run_in_subprocess(env_vars: dict, code: str = _TWICE) -> dict:
     env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
     env.update(env_vars, PYTHONPATH=os.pathsep.join([str(ROOT / "tests"), str(ROOT)]))
-    out = subprocess.run([sys.executable, "-c", _TWICE], env=env, capture_output=True,
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, check=True, timeout=600)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -143,6 +157,10 @@ def test_a_second_identical_run_loads_its_programs_from_the_cache(tmp_path):
     second = _run_in_subprocess({"SMJAX_CACHE_DIR": str(cache)})
     # every program the first run compiled is loaded, none compiled again
     assert second["misses"] == 0 and second["hits"] >= first["misses"], (first, second)
-    off = tmp_path / "off"
-    unused = _run_in_subprocess({"SMJAX_CACHE_DIR": str(off), "SMJAX_COMPILATION_CACHE": "0"})
-    assert not off.exists() and unused["hits"] == 0  # the opt-out neither writes nor reads
+    # the opt-out neither writes nor reads (the same program is cached without it)
+    on, off = tmp_path / "on", tmp_path / "off"
+    used = _run_in_subprocess({"SMJAX_CACHE_DIR": str(on)}, _ONE_PROGRAM)
+    assert used["misses"] > 0 and any(on.iterdir()), used
+    unused = _run_in_subprocess({"SMJAX_CACHE_DIR": str(off), "SMJAX_COMPILATION_CACHE": "0"},
+                                _ONE_PROGRAM)
+    assert not off.exists() and unused["hits"] == 0 and unused["misses"] == 0, unused

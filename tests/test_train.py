@@ -43,8 +43,8 @@ def test_a_level_does_not_end_on_exploration_luck():
     # (only the root is examined: give_key's level gets a budget of one chunk)
     cfg = TrainConfig(algo="dqn", hierarchy="scripted", num_envs=32, rollout_ticks=16,
                       updates_per_chunk=2, success_window=64, max_episodes_per_level=160,
-                      threshold=0.5, gate_envs=64, gate_interval=1, eval_envs=32, agent=agent,
-                      levels={"give_key": {"max_episodes_per_level": 1}})
+                      threshold=0.5, gate_envs=64, gate_interval=1, eval_envs=64, agent=agent,
+                      levels={"give_key": {"max_steps_per_level": 1}})
     root = run(make_keydoor(), cfg, [0, 1, 2], progress=False)["levels"][0]
     assert min(root["final_running_success"]) >= 0.5  # every seed's exploration "passed"
     for s in range(3):
@@ -121,6 +121,7 @@ def test_unknown_config_field_and_bad_seeds():
         run(make_keydoor(), TrainConfig(**(SMALL | {"hierarchy": "nope"})), [0], progress=False)
 
 
+@pytest.mark.slow  # ~1-3 min of a 2-core CI; the key-door runs above check learning by default
 def test_craft_get_wood_reaches_threshold_on_cpu():
     # No acceptance gate (its own compile and 256 episodes): what this test examines is that
     # PPO learns Craft on the CPU, and final_success below runs the learned policy alone.

@@ -13,6 +13,11 @@ instant, a full disk and a write error:
    directory);
 4. only then are older steps (and leftovers of interrupted saves) deleted.
 
+A save that fails (read-only or full file system, I/O error) raises ``CheckpointError``
+at once, in one line: the folder is probed first, orbax creates the step directory in the
+calling thread (a failure there left its writer threads waiting ~300 s), and orbax's own
+tracebacks of the failure are kept off the terminal.
+
 With several processes only process 0 touches the directory: the trainer gathers the
 arrays to host numpy first, orbax runs on process 0 alone (its barriers limited to that
 process), and on resume process 0 reads and broadcasts (``shared_meta``, the trainer's
@@ -21,9 +26,18 @@ resumes the other's checkpoints.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
+import gc
+import io
 import json
+import logging
 import os
 import shutil
+import sys
+import threading
+import time
+import traceback
 from pathlib import Path
 from typing import Any
 
@@ -52,11 +66,81 @@ def _flat(arrays: Any) -> dict:
 def _checkpointer():
     import orbax.checkpoint as ocp
 
-    if not dist.is_multiprocess():
-        return ocp.StandardCheckpointer()
-    # only process 0 calls orbax; without this its barriers would wait for the others
-    only_writer = ocp.options.MultiprocessingOptions(primary_host=0, active_processes={0})
-    return ocp.StandardCheckpointer(multiprocessing_options=only_writer)
+    kwargs = {}
+    try:
+        # The step directory is created in the calling thread, so a failure to create it
+        # (read-only or full file system) raises at once: created in a background thread,
+        # its failure left orbax's writer threads waiting ~300 s for the directory.
+        kwargs["async_options"] = ocp.options.AsyncOptions(create_directories_asynchronously=False)
+    except (AttributeError, TypeError):  # an orbax without the option
+        pass
+    if dist.is_multiprocess():
+        # only process 0 calls orbax; without this its barriers would wait for the others
+        kwargs["multiprocessing_options"] = ocp.options.MultiprocessingOptions(
+            primary_host=0, active_processes={0})
+    return ocp.StandardCheckpointer(**kwargs)
+
+
+class _QuietOrbax(logging.Filter):
+    """Drops orbax's log records (and asyncio's about orbax's tasks) while a save runs."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        where = f"{os.sep}orbax{os.sep}"
+        return where not in (record.pathname or "") and where not in record.getMessage()
+
+
+class _OrbaxFutureNoise(logging.Filter):
+    """asyncio's "exception was never retrieved" reports about the futures of a failed
+    orbax save, which surface whenever they are garbage collected (often at exit, after
+    ``save_checkpoint`` has reported the failure): one per file, tens of tracebacks."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        if record.exc_info and record.exc_info[2] is not None:
+            text += "".join(traceback.format_tb(record.exc_info[2]))
+        return "orbax" not in text
+
+
+_FUTURE_NOISE = _OrbaxFutureNoise()
+
+
+@contextlib.contextmanager
+def _quiet_orbax():
+    """A failed save makes orbax log every writer thread's traceback and its I/O library
+    print more (hundreds of lines); ``save_checkpoint`` reports a failure itself, in one
+    line. What the save prints on stderr is held back and passed on only if it succeeds
+    (the caller sets ``state["failed"]``)."""
+    loggers = [logging.getLogger(name) for name in ("absl", "asyncio", "")]
+    quiet, held, state = _QuietOrbax(), io.StringIO(), {"failed": False}
+    if _FUTURE_NOISE not in loggers[1].filters:  # for the life of the process
+        loggers[1].addFilter(_FUTURE_NOISE)
+    for logger in loggers:
+        logger.addFilter(quiet)
+    try:
+        with contextlib.redirect_stderr(held):
+            yield state
+    except BaseException:
+        state["failed"] = True
+        raise
+    finally:
+        for logger in loggers:
+            logger.removeFilter(quiet)
+        if not state["failed"] and held.getvalue():
+            sys.stderr.write(held.getvalue())
+
+
+def _is_disk_full(err: BaseException) -> bool:
+    text = str(err)
+    return ((isinstance(err, OSError) and err.errno == errno.ENOSPC) or "No space left" in text
+            or ("RESOURCE_EXHAUSTED" in text and "writ" in text.lower()))
+
+
+def _write_failure(target: Path, root: Path, err: BaseException) -> str:
+    kept = f"the previous checkpoint in {root} is kept"
+    if _is_disk_full(err):
+        return (f"disk full: could not write checkpoint {target} ({_first_line(err)}); {kept}; "
+                f"free space, then --resume the run")
+    return f"could not write checkpoint {target} ({_first_line(err)}); {kept}"
 
 
 def _first_line(err: BaseException) -> str:
@@ -126,18 +210,37 @@ def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> 
     target = root / _fresh_name(root, step, _in_force(root))
     if target.exists():  # an unreferenced leftover of an interrupted save
         shutil.rmtree(target)
+    failure = None
+    before = set(threading.enumerate())
     try:
         checkpointer = _checkpointer()
-        checkpointer.save(target, _flat(arrays))
-        checkpointer.wait_until_finished()
-        _fsync_tree(target)
-        atomic_write_text(root / LATEST,
-                          json.dumps({"step": step, "path": target.name, "meta": meta}))
-    except Exception as err:  # disk full, I/O error: the previous checkpoint stays in force
+        with _quiet_orbax() as quiet:
+            try:
+                try:
+                    checkpointer.save(target, _flat(arrays))
+                    checkpointer.wait_until_finished()
+                finally:
+                    checkpointer.close()  # no writer thread outlives the save
+            except Exception as err:  # disk full, read-only, I/O error
+                quiet["failed"] = True
+                failure = _write_failure(target, root, err)
+            if failure is not None:  # (outside the except block, which holds the traceback)
+                # the first failure ends the wait while other writer threads may still run
+                # and report theirs: let them finish here, quietly, for a bounded time
+                deadline = time.monotonic() + 10
+                for thread in set(threading.enumerate()) - before:
+                    thread.join(timeout=max(0.0, deadline - time.monotonic()))
+                gc.collect()  # orbax's failed tasks are reported (to nobody) here, not at exit
+        if failure is None:
+            _fsync_tree(target)
+            atomic_write_text(root / LATEST,
+                              json.dumps({"step": step, "path": target.name, "meta": meta}))
+    except Exception as err:
+        failure = _write_failure(target, root, err)
+    if failure is not None:  # the previous checkpoint stays in force
         if _in_force(root) != target.name:
             shutil.rmtree(target, ignore_errors=True)
-        raise CheckpointError(f"could not write checkpoint {target} ({_first_line(err)}); the "
-                              f"previous checkpoint in {root} is kept") from err
+        raise CheckpointError(failure)
     _prune(root, keep=target.name)
     return target
 

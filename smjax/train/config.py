@@ -33,7 +33,9 @@ class TrainConfig:
       rollout_ticks: ticks per rollout (one learner update per rollout).
       updates_per_chunk: rollouts per compiled chunk (the host checks progress between chunks).
       threshold: a level ends when its running success reaches this (the paper: 0.8).
-      success_window: number of recent learner episodes the running success averages.
+      success_window: number of recent learner episodes the running success averages; at
+        most ``max_episodes_per_level`` (a longer window could never fill, so the threshold
+        could never be reached), per level too.
       max_episodes_per_level: the level's budget L (environment episodes).
       max_steps_per_level: a second budget in environment steps (0: none); a level ends at
         whichever budget it meets first. Env-step budgets compare methods fairly when
@@ -170,12 +172,23 @@ class TrainConfig:
         need(isinstance(self.levels, dict) and all(isinstance(k, str) and isinstance(v, dict)
                                                    for k, v in self.levels.items()),
              "levels", "a mapping of template name -> {field: value}")
+        if self.success_window > self.max_episodes_per_level:
+            raise ConfigError(
+                f"config field 'success_window' = {self.success_window} exceeds "
+                f"'max_episodes_per_level' = {self.max_episodes_per_level}: the running success "
+                f"would never fill its window within the level's episode budget, so the threshold "
+                f"could never be reached; lower success_window (--set success_window=N) or raise "
+                f"max_episodes_per_level")
         for name, fields in self.levels.items():
             unknown = sorted(set(fields) - set(LEVEL_FIELDS), key=repr)
             if unknown:
                 raise ConfigError(f"config field 'levels' for template {name!r}: unknown field(s) "
                                   f"{unknown}; per-level fields: {list(LEVEL_FIELDS)}")
-            dataclasses.replace(self, levels={}, **fields)  # validates the override values
+            try:  # validates the override values, and the level's window against its budget
+                dataclasses.replace(self, levels={}, **fields)
+            except ConfigError as err:
+                raise ConfigError(f"config field 'levels' for template {name!r}: {err} (set both "
+                                  f"in levels[{name!r}] if only this level differs)") from None
 
     @property
     def finetune_on(self) -> bool:

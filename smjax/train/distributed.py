@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import sys
 from typing import Any, Sequence
 
 import jax
@@ -127,13 +128,103 @@ def initialize(coordinator: str | None = None, num_processes: int | None = None,
     if isinstance(auto_detect, str):
         kwargs["cluster_detection_method"] = auto_detect
     try:
-        jax.distributed.initialize(**kwargs)
+        _initialize_guarded(kwargs)
     except RuntimeError as err:
         if "before" in str(err):
             raise RuntimeError(f"{err} (call smjax.train.distributed.initialize first, before "
                                f"creating any JAX array)") from err
         raise
     return jax.process_count() > 1
+
+
+class CoordinatorError(ValueError):
+    """This process could not join the multi-process run; the message says what to check."""
+
+
+def _initialize_guarded(kwargs: dict) -> None:
+    """``jax.distributed.initialize``, where a failure to join raises ``CoordinatorError``.
+
+    JAX's runtime client aborts the whole process with a C++ stack trace when it cannot
+    join (the coordinator or another process did not come within the timeout, or the
+    address is another service's): its default error callback is fatal. Here the client
+    gets a callback of ours, so the failed connect raises instead, the half-started
+    runtime is shut down quietly and the error is one line. A fatal error after joining
+    (another process died) still ends this process: the callback exits it (or, where the
+    runtime cannot pass it the error, the runtime terminates it), never a silent hang.
+    """
+    import time
+
+    try:
+        import jax._src.distributed as jdist
+        make_client = jdist._jax.get_distributed_runtime_client
+    except (ImportError, AttributeError):  # another jax layout: its default behaviour
+        jax.distributed.initialize(**kwargs)
+        return
+    joined = [False]
+
+    def on_fatal_error(*_):
+        if joined[0]:  # after joining: JAX's own behaviour (end the process), in one line
+            print("error: the multi-process run failed: another process stopped or lost its "
+                  "connection; see that process's output", file=sys.stderr, flush=True)
+            os._exit(1)
+        # while joining: returning lets connect() fail with an exception
+
+    def client_with_callback(*args, **kw):
+        try:
+            return make_client(*args, **kw, missed_heartbeat_callback=on_fatal_error)
+        except TypeError:  # a jaxlib without the argument
+            return make_client(*args, **kw)
+
+    start = time.monotonic()
+    jdist._jax.get_distributed_runtime_client = client_with_callback
+    try:
+        jax.distributed.initialize(**kwargs)
+    except Exception as err:  # noqa: BLE001 - only a failed connect is rewritten below
+        if jdist.global_state.client is None:  # failed before connecting: JAX's own error
+            raise
+        _discard_runtime(jdist.global_state)
+        raise CoordinatorError(_join_failure(kwargs, time.monotonic() - start, err)) from None
+    finally:
+        jdist._jax.get_distributed_runtime_client = make_client
+    joined[0] = True
+
+
+def _join_failure(kwargs: dict, elapsed: float, err: BaseException) -> str:
+    address, timeout = kwargs.get("coordinator_address"), kwargs.get("initialization_timeout")
+    who = f"process {kwargs.get('process_id')} of {kwargs.get('num_processes')}"
+    detail = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    if timeout and elapsed >= 0.9 * timeout:
+        why = (f"the run did not form within {timeout} s (the coordinator or another process did "
+               f"not answer, or the address is another service's)")
+    elif "bad_cast" in detail:  # the runtime could not pass its status on
+        why = "the address answered, but not as the run's coordinator (another service's port?)"
+    else:
+        why = detail[:200]
+    return (f"could not join the multi-process run at {address} as {who}: {why}; start every "
+            f"process with the same --coordinator and --num-processes (process 0 on the "
+            f"coordinator's host), check the address and port, or raise --coordinator-timeout")
+
+
+def _discard_runtime(state) -> None:
+    """Shut a half-started runtime down with its C++ log lines silenced (they would repeat
+    the error as many lines), so nothing is left for JAX's exit handler to report."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        for part in ("preemption_sync_manager", "client", "service"):
+            obj = getattr(state, part, None)
+            if obj is not None:
+                try:
+                    obj.shutdown()
+                except Exception:  # noqa: BLE001 - it is in an error state by definition
+                    pass
+                setattr(state, part, None)
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
 
 
 def is_multiprocess() -> bool:

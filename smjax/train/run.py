@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import json
-import warnings
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -71,17 +71,6 @@ def _claim_out_dir(out_dir, resume: bool, overwrite: bool) -> DirLock | None:
     return lock
 
 
-def _warn_unreachable_windows(cfg: TrainConfig, plans) -> None:
-    """A success window longer than the episode budget makes the threshold unreachable."""
-    for plan in plans:
-        level = cfg.for_level(plan.name)
-        if level.success_window > level.max_episodes_per_level:
-            warnings.warn(
-                f"level {plan.name!r}: success_window {level.success_window} exceeds "
-                f"max_episodes_per_level {level.max_episodes_per_level}, so its running success "
-                f"can never reach the threshold; lower success_window", stacklevel=3)
-
-
 def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None = None, *,
         env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
         overwrite: bool = False) -> dict:
@@ -103,9 +92,14 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     cfg.validate()
     if cfg.finetune_on and dist.is_multiprocess():
         # measured: two processes deadlock once a seed starts fine-tuning (tests/test_distributed.py)
-        raise ConfigError("fine-tuning does not run across several processes yet; pass "
-                          "--finetune off (TrainConfig(finetune='off')) for a multi-process run, "
-                          "or fine-tune on one process")
+        if cfg.finetune == "on":
+            raise ConfigError("fine-tuning does not run across several processes yet; pass "
+                              "--finetune off (TrainConfig(finetune='off')) for a multi-process "
+                              "run, or fine-tune on one process")
+        cfg = cfg.replace(finetune="off")  # "auto": on where it can run
+        if dist.is_writer():
+            print("smjax: fine-tuning is off in a multi-process run (not supported there yet)",
+                  file=sys.stderr)
     cfg = cfg.replace(agent=normalize_agent(cfg.algo, cfg.agent))
     env_overrides = dict(env_overrides or {})
     if resume and out_dir is None:
@@ -140,7 +134,6 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     hierarchy_name, hierarchy = resolve_hierarchy(env, cfg)
     plans = plan_levels(hierarchy, cfg.method)
     cfg.check_level_names([p.name for p in plans])
-    _warn_unreachable_windows(cfg, plans)
     check_fits(env, env_params, cfg, len(seeds))
     agent = make_agent(cfg.algo, **cfg.agent)
     engine = Engine(env, env_params, hierarchy, agent, cfg)

@@ -9,7 +9,6 @@ Leading/trailing blank lines and the indentation common to all rows are ignored.
 from __future__ import annotations
 
 import textwrap
-import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -81,13 +80,17 @@ def parse_ascii(text: str) -> tuple[np.ndarray, tuple[int, int]]:
 def from_ascii(text: str, task: str = "get_gem", max_steps: int | None = None):
     """(state, params) for that fixed map; every reset with these params restores it.
 
-    A ``get_X`` task on a map without any X can never succeed: that warns (it is legal,
-    and useful for testing the rules on small maps)."""
+    A ``get_X`` task on a map without any X can never succeed, so it is refused
+    (ValueError): put an X on the map (glyph in the module docstring) or pass the task the
+    map is for. A map made to test rules rather than to be solved can carry an X in a
+    corner nothing reaches."""
     grid, (x, y) = parse_ascii(text)
     goal = C.TASKS[C.check_task(task)]
     if goal in C.PRIMITIVES and not (grid == C.KIND_ID[goal]).any():
-        warnings.warn(f"the map holds no {goal}: task {task!r} can never succeed on it",
-                      stacklevel=2)
+        glyph = C.GLYPH_OF_KIND[C.KIND_ID[goal]]
+        raise ValueError(f"the map holds no {goal} ({glyph!r}): task {task!r} can never succeed "
+                         f"on it; add a {goal} ({glyph!r}) to the map or pass the task the map is for "
+                         f"(task=...)")
     state = CraftState(
         grid=jnp.asarray(grid),
         pos=jnp.array([x, y], jnp.int32),
