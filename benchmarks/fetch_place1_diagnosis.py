@@ -19,8 +19,8 @@ import numpy as np  # noqa: E402
 
 import fetch_sample_complexity as fsc  # noqa: E402
 from smjax.agents import make_agent  # noqa: E402
-from smjax.envs.fetch import state as fetch_state  # noqa: E402
-from smjax.envs.fetch.observation import blocks_placed  # noqa: E402
+from smjax.envs.fetch import types as fetch_types  # noqa: E402
+from smjax.envs.fetch.dynamics import blocks_placed  # noqa: E402
 from smjax.options.runner import Controls  # noqa: E402
 from smjax.train.engine import Engine  # noqa: E402
 from smjax.train.run import run  # noqa: E402
@@ -71,7 +71,7 @@ def main() -> None:
             placed = np.asarray(jax.vmap(lambda s: blocks_placed(s, params))(before))
             first_calls += int(first.sum())
             block0_placed += int((first & placed[:, 0]).sum())
-            grip = np.asarray(jax.vmap(fetch_state.gripper_pos)(before))
+            grip = np.asarray(jax.vmap(fetch_types.gripper_pos)(before))
             grip_to_goal1 += list(np.linalg.norm(grip - np.asarray(before.goals)[:, 1], axis=-1)[first])
         done = np.asarray(ends.finished)
         finished += int(done.sum())

@@ -46,7 +46,7 @@ from _stats import mean_std  # noqa: E402
 
 DIFFICULTIES = ("easy", "medium", "hard")
 METHODS = ("top-down", "flat")
-# The paper's average goal difference per full game (as quoted in issue #5).
+# The paper's average goal difference per full game (docs/environments.md, section 1).
 PAPER = {"top-down": {"easy": 5.79, "medium": 3.0, "hard": 2.0},
          "flat": {"easy": 1.2, "medium": 0.8, "hard": 0.26}}
 # DQN settings shared by both methods: the library defaults, except one gradient step per

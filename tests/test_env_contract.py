@@ -52,6 +52,42 @@ def test_craft_plain_world_and_an_inline_hierarchy():
     check_hierarchy(env, params, hierarchy, **SMALL)
 
 
+def test_auto_reset_lives_in_the_base_class():
+    """No environment family overrides ``step``; each declares the ``initial_state`` hook
+    that lets the base class's auto-reset observe only the state it keeps."""
+    from smjax.core.env import Environment
+    from smjax.envs.craft import CraftEnv
+    from smjax.envs.fetch import FetchEnv
+    from smjax.envs.football import FootballEnv
+
+    for cls in (CraftEnv, FetchEnv, FootballEnv):
+        assert cls.step is Environment.step, f"{cls.__name__} overrides step"
+        assert cls.initial_state is not Environment.initial_state, cls.__name__
+        assert cls.reset_env is Environment.reset_env, f"{cls.__name__} overrides reset_env"
+    assert FootballEnv.reset_ignores_key and not CraftEnv.reset_ignores_key
+
+
+def test_the_generic_auto_reset_path_equals_the_hook_path():
+    """An environment with ``initial_state`` steps exactly as if it had only ``reset_env``
+    (the generic path: observe both, select the observation)."""
+    class Generic(type(smjax.make("craft/get_wood")[0])):
+        has_initial_state = False  # take the generic path of Environment.step
+
+    env, params = smjax.make("craft/get_wood", max_steps=2)
+    generic = Generic(env.config)
+    step = jax.jit(jax.vmap(env.step, in_axes=(0, 0, 0, None)))
+    step_generic = jax.jit(jax.vmap(generic.step, in_axes=(0, 0, 0, None)))
+    keys = jax.random.split(jax.random.PRNGKey(3), 8)
+    _, state = jax.vmap(env.reset, in_axes=(0, None))(keys, params)
+    for t in range(3):  # max_steps=2: every environment resets at t = 1
+        keys = jax.vmap(lambda k: jax.random.fold_in(k, t))(keys)
+        actions = jnp.arange(8) % 5
+        out = step(keys, state, actions, params)
+        assert_trees_close(out, step_generic(keys, state, actions, params),
+                           prop="hook == generic", who="craft", exact=True)
+        state = out[1]
+
+
 def _notebook_env():
     """The environment notebooks/custom_env.ipynb defines (its cell run here, unchanged)."""
     path = Path(__file__).resolve().parent.parent / "notebooks" / "custom_env.ipynb"

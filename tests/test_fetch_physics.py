@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import smjax
-from smjax.envs.fetch import state as st
+from smjax.envs.fetch import types as st
 from smjax.envs.fetch.model import BLOCK_REST_Z
 
 

@@ -12,11 +12,12 @@ import pytest
 from hypothesis import given, settings, strategies as hs
 
 import smjax
-from smjax.envs.fetch import state as st
+from smjax.envs.fetch import types as st
 from smjax.envs.fetch.model import BLOCK_REST_Z, GRIPPER_START, build_model
-from smjax.envs.fetch.observation import observation, reward, score
-from smjax.envs.fetch.sampling import sample_blocks, sample_goals
-from smjax.envs.fetch.state import FetchConfig
+from smjax.envs.fetch.dynamics import reward, score
+from smjax.envs.fetch.observation import observation
+from smjax.envs.fetch.reset import sample_blocks, sample_goals
+from smjax.envs.fetch.types import FetchConfig
 
 
 @pytest.fixture(scope="module")

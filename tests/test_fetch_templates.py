@@ -3,7 +3,7 @@
 One rollout per reset runs the schedule reach_0 -> pick_0 -> release_0 -> place_1 (2
 blocks), each template from the state the previous one left (its typical initiation
 state), each until ``satisfied`` or its ``k_max``. The fast test uses 16 resets, the slow
-one the issue's 64 resets with the >= 95 % bar.
+one 64 resets with the >= 95 % bar (the reliability the templates are held to).
 """
 import os
 

@@ -12,7 +12,9 @@ from smjax.envs.football.builtin_ai import all_actions
 from smjax.envs.football.match import ai_tick
 from smjax.envs.football.observation import paper139, simple115
 from smjax.envs.football.rules import step_game
-from smjax.envs.football.state import draw_noise, initial_state, mirror_actions, mirror_noise, mirror_state
+from smjax.envs.football.mirror import mirror_actions, mirror_noise, mirror_state
+from smjax.envs.football.noise import draw_noise
+from smjax.envs.football.reset import initial_state
 from test_football_scenes import parked_positions, scene
 
 

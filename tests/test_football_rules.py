@@ -9,7 +9,8 @@ from hypothesis import given, settings, strategies as st
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import quantize_direction
 from smjax.envs.football.rules import step_game
-from smjax.envs.football.state import draw_noise, initial_state, kickoff_positions
+from smjax.envs.football.noise import draw_noise
+from smjax.envs.football.reset import initial_state, kickoff_positions
 from test_football_scenes import parked_positions, run_jit, scene
 
 IDLE22 = np.zeros(22, np.int32)

@@ -7,7 +7,9 @@ import numpy as np
 
 from smjax.envs.football import constants as C
 from smjax.envs.football.rules import step_game
-from smjax.envs.football.state import FootballState, draw_noise, initial_state
+from smjax.envs.football.noise import draw_noise
+from smjax.envs.football.reset import initial_state
+from smjax.envs.football.types import FootballState
 
 
 def parked_positions() -> np.ndarray:

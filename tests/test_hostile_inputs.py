@@ -1,4 +1,4 @@
-"""Issue #18's probes as tests: every bad input is refused in one line (exit code 2 from the
+"""Hostile-input probes as tests: every bad input is refused in one line (exit code 2 from the
 CLI, no traceback), override values are parsed strictly for every environment, and no
 checkpoint is ever lost: not on a re-save, not under a second run into the same
 directory, not under kills at random instants (the last is ``slow``).

@@ -1,5 +1,8 @@
 """The interface between learners and the (hierarchical) rollout machinery.
 
+``Transition`` and ``ActOutput`` live in ``smjax.core.transition`` (below both the option
+machinery and the learners) and are re-exported here.
+
 A rollout is a sequence of *ticks*; in every tick every environment takes one primitive
 step. The learner does not decide in every tick: while an option it called is running
 (or while the levels above have not yet called the learner's template) other policies
@@ -30,25 +33,7 @@ from typing import Any, Callable, NamedTuple
 
 import jax
 
-
-class Transition(NamedTuple):
-    """One tick of B environments (leading axes [T, B] inside a rollout)."""
-
-    obs: jax.Array          # observation before the tick's step
-    action: jax.Array       # int32 action index the learner chose (meaningful where decision)
-    action_mask: jax.Array  # bool [A]: actions the learner could choose at this tick
-    log_prob: jax.Array     # behaviour log-probability of ``action``
-    value: jax.Array        # learner's value estimate of ``obs``
-    decision: jax.Array     # bool: the learner decided at this tick
-    reward: jax.Array       # learner reward received after this tick's step
-    discount: jax.Array     # per-tick discount factor (gamma or gamma**d)
-    done: jax.Array         # bool: the learner's episode ended after this tick
-
-
-class ActOutput(NamedTuple):
-    action: jax.Array
-    log_prob: jax.Array
-    value: jax.Array
+from smjax.core.transition import ActOutput, Transition  # noqa: F401  (re-exported)
 
 
 class Agent(NamedTuple):

@@ -34,7 +34,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from smjax.agents.base import Transition
+from smjax.core.transition import Transition, no_pending  # noqa: F401  (no_pending re-exported)
 
 
 def _tick_accumulate(carry_reward, carry_discount, reward, discount, done):
@@ -169,17 +169,6 @@ def smdp_transitions(
     )
     valid = complete_decisions(done, decision)
     return SMDPTransitions(r_out, g_out, term_out, next_obs, next_mask, valid)
-
-
-def no_pending(obs: jax.Array, num_actions: int) -> Transition:
-    """The empty pending row for a batch (``obs [B, ...]``): no decision, reward 0, discount 1."""
-    batch = obs.shape[:1]
-    return Transition(
-        obs=jnp.zeros_like(obs), action=jnp.zeros(batch, jnp.int32),
-        action_mask=jnp.ones(batch + (int(num_actions),), bool),
-        log_prob=jnp.zeros(batch, jnp.float32), value=jnp.zeros(batch, jnp.float32),
-        decision=jnp.zeros(batch, bool), reward=jnp.zeros(batch, jnp.float32),
-        discount=jnp.ones(batch, jnp.float32), done=jnp.zeros(batch, bool))
 
 
 def carry_pending(pending: Transition, traj: Transition) -> tuple[Transition, Transition]:

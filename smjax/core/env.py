@@ -1,14 +1,33 @@
 """The environment protocol every smjax environment implements (gymnax 1.0 lineage).
 
 An environment is a stateless object whose methods are pure functions of explicit
-state and params, so they jit and vmap. Subclasses implement ``reset_env``,
-``step_env`` (no auto-reset) and the spaces; the base class adds ``reset`` and the
-auto-resetting six-value ``step``:
+state and params, so they jit and vmap. Subclasses implement ``initial_state`` (or
+``reset_env``), ``step_env`` (no auto-reset), ``get_obs`` and the spaces; the base class
+adds ``reset`` and the auto-resetting six-value ``step``:
 
     obs, state, reward, terminated, truncated, info = env.step(key, state, action, params)
 
 When an episode ends inside ``step`` the returned ``obs``/``state`` already belong to
 the next episode and ``info["final_observation"]`` holds the observation it ended on.
+Auto-reset lives here and only here: no environment overrides ``step``.
+
+Under ``vmap`` both sides of the reset select run in every step, so a reset is paid on
+every step of every environment. Two hooks keep that cheap:
+
+* ``initial_state(key, params)``: the state an episode starts from, without its
+  observation. An environment that implements it gets ``reset_env`` for free, and
+  ``step`` selects the *state* first (step_env's or the fresh one) and observes the
+  selected one once, instead of observing both and selecting an observation. Where the
+  observation is the expensive part (Craft's 1586 features) this halves the work of a
+  step; a caller that ignores ``info["final_observation"]`` lets XLA drop step_env's own
+  observation too. It requires that step_env's observation is ``get_obs`` of the state
+  it returns (so that ``obs`` is exactly what the generic path would give).
+* ``reset_ignores_key``: True where every episode starts from the same state (football's
+  kick-off). ``step`` then hands its key to ``step_env`` whole instead of splitting it
+  (a threefry call per step saved).
+
+Environments without ``initial_state`` (adapters, small test environments) take the
+generic path: ``reset_env`` and ``step_env`` each observe, and the observation is selected.
 The option machinery uses ``step_env``/``reset_env`` directly, because it decides
 itself when an episode (of a learner) ends.
 """
@@ -41,14 +60,27 @@ class Environment(Generic[TEnvState, TEnvParams]):
     #: lies in [0, 1]. Lets the trainer stop a level's gate as soon as its outcome is
     #: certain; leave False where returns can leave [0, 1] (e.g. goal differences).
     success_in_unit_interval: bool = False
+    #: ``initial_state``/``reset_env`` ignore their key (every episode starts from the same
+    #: state): ``step`` then passes its key to ``step_env`` unsplit (see the module docstring).
+    reset_ignores_key: bool = False
 
     # ---- to implement -------------------------------------------------
     @property
     def default_params(self) -> TEnvParams:
         raise NotImplementedError
 
-    def reset_env(self, key: jax.Array, params: TEnvParams) -> tuple[jax.Array, TEnvState]:
+    def initial_state(self, key: jax.Array, params: TEnvParams) -> TEnvState:
+        """The state an episode starts from, without its observation (optional hook).
+
+        Implement this *or* ``reset_env``; with it, ``reset_env`` is ``get_obs`` of this
+        state and ``step``'s auto-reset observes only the state it keeps.
+        """
         raise NotImplementedError
+
+    def reset_env(self, key: jax.Array, params: TEnvParams) -> tuple[jax.Array, TEnvState]:
+        """(observation, state) an episode starts from; default: ``initial_state``."""
+        state = self.initial_state(key, params)
+        return self.get_obs(state, params), state
 
     def step_env(
         self, key: jax.Array, state: TEnvState, action: jax.Array, params: TEnvParams
@@ -98,20 +130,36 @@ class Environment(Generic[TEnvState, TEnvParams]):
         action: jax.Array,
         params: TEnvParams | None = None,
     ) -> StepResult:
-        """Step with auto-reset; the pre-reset observation is in ``info["final_observation"]``."""
+        """Step with auto-reset; the pre-reset observation is in ``info["final_observation"]``.
+
+        The one auto-reset of every environment (see the module docstring for the hooks
+        that make it cheap).
+        """
         if params is None:
             params = self.default_params
-        key_step, key_reset = jax.random.split(key)
+        if self.reset_ignores_key:
+            key_step = key_reset = key
+        else:
+            key_step, key_reset = jax.random.split(key)
         obs_st, state_st, reward, terminated, truncated, info = self.step_env(
             key_step, state, action, params
         )
-        obs_re, state_re = self.reset_env(key_reset, params)
         done = jnp.logical_or(terminated, truncated)
-        state = select_tree(done, state_re, state_st)
-        obs = select_tree(done, obs_re, obs_st)
+        if self.has_initial_state:
+            state = select_tree(done, self.initial_state(key_reset, params), state_st)
+            obs = self.get_obs(state, params)
+        else:
+            obs_re, state_re = self.reset_env(key_reset, params)
+            state = select_tree(done, state_re, state_st)
+            obs = select_tree(done, obs_re, obs_st)
         info = dict(info)
         info["final_observation"] = obs_st
         return obs, state, reward, terminated, truncated, info
+
+    @property
+    def has_initial_state(self) -> bool:
+        """The class implements the ``initial_state`` hook."""
+        return type(self).initial_state is not Environment.initial_state
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name}>"

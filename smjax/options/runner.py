@@ -25,9 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from smjax.agents.base import ActOutput, Transition
-from smjax.agents.smdp import no_pending
 from smjax.core.env import select_tree
+from smjax.core.transition import ActOutput, Transition, no_pending
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.template import Parametric
 from smjax.options.stack import (

@@ -12,7 +12,7 @@ from smjax.envs.craft.ascii import (
     REFERENCE_GEM_MAP, REFERENCE_GOLD_MAP, from_ascii, inventory_dict, parse_ascii, to_ascii,
 )
 from smjax.envs.craft.env import CraftEnv, make_craft, register_all
-from smjax.envs.craft.structs import CraftConfig, CraftParams, CraftState, make_params
+from smjax.envs.craft.types import CraftConfig, CraftParams, CraftState, make_params
 from smjax.envs.craft.templates import default_hierarchy_name, hierarchy_names
 
 TASKS = tuple(constants.TASKS)

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.envs.craft import constants as C
-from smjax.envs.craft.structs import CraftParams, CraftState, make_params
+from smjax.envs.craft.types import CraftParams, CraftState, make_params
 
 N = C.GRID_SIZE
 

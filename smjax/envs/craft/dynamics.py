@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.envs.craft import constants as C
-from smjax.envs.craft.structs import CraftParams, CraftState
+from smjax.envs.craft.types import CraftParams, CraftState
 
 N = C.GRID_SIZE
 

@@ -2,22 +2,25 @@
 
 Actions: Discrete(5) = DOWN 0 (y-1), UP 1 (y+1), LEFT 2 (x-1), RIGHT 3 (x+1), USE 4.
 ``step_env`` also accepts NOOP = 5 (not in the action space) so that an impossible teleport
-is a do-nothing step. Rules in ``dynamics``, world generation in ``worldgen``,
-observations in ``observation``, templates and hierarchies in ``templates``.
+is a do-nothing step. The package's modules, one job each (the same names in every
+environment package): ``types`` (state, params, static config), ``reset`` (world generation
+and the initial state), ``dynamics`` (transition and reward), ``observation``, ``templates``
+(option templates and hierarchies), ``render``, ``env`` (this class and its factory); and
+Craft's own ``constants`` (kinds, recipes, tasks, step caps), ``ascii`` (maps as text) and
+``bench`` (throughput).
 """
 from __future__ import annotations
 
 import jax
-import jax.numpy as jnp
 
 from smjax.core import spaces
-from smjax.core.env import Environment, select_tree
+from smjax.core.env import Environment
 from smjax.core.overrides import INT32_MAX, parse_bool, parse_choice, parse_int
 from smjax.core.registry import register
 from smjax.envs.craft import constants as C
-from smjax.envs.craft import dynamics, observation, templates, worldgen
+from smjax.envs.craft import dynamics, observation, reset, templates
 from smjax.envs.craft.render import render_state
-from smjax.envs.craft.structs import (
+from smjax.envs.craft.types import (
     OBSERVATIONS, CraftConfig, CraftParams, CraftState, make_params,
 )
 
@@ -40,52 +43,13 @@ class CraftEnv(Environment[CraftState, CraftParams]):
     def default_params(self) -> CraftParams:
         return make_params(self.config.task)
 
-    def new_state(self, key: jax.Array) -> CraftState:
-        """A freshly generated world (ignores any fixed map)."""
-        grid, pos = worldgen.generate(key, self.config.world)
-        return CraftState(
-            grid=grid,
-            pos=pos,
-            direction=jnp.int32(C.DOWN),
-            inventory=jnp.zeros(C.NUM_KINDS, jnp.int32),
-            step=jnp.int32(0),
-        )
-
     def initial_state(self, key: jax.Array, params: CraftParams) -> CraftState:
-        """The state ``reset_env`` starts from (a fresh world, or the fixed map)."""
-        fresh = self.new_state(key)
-        fixed = CraftState(
-            grid=params.fixed_grid,
-            pos=params.fixed_pos,
-            direction=params.fixed_direction,
-            inventory=jnp.zeros(C.NUM_KINDS, jnp.int32),
-            step=jnp.int32(0),
-        )
-        return select_tree(params.use_fixed_map, fixed, fresh)
+        """The state an episode starts from (a fresh world, or the fixed map).
 
-    def reset_env(self, key: jax.Array, params: CraftParams) -> tuple[jax.Array, CraftState]:
-        state = self.initial_state(key, params)
-        return self.get_obs(state, params), state
-
-    def step(self, key: jax.Array, state: CraftState, action: jax.Array,
-             params: CraftParams | None = None):
-        """Auto-resetting step, same contract as ``Environment.step``.
-
-        Selects the next *state* first and observes it once; the pre-reset observation is
-        computed separately for ``info["final_observation"]``, so a caller that ignores it
-        lets XLA drop that second (expensive) observation.
+        This hook is what makes ``Environment.step``'s auto-reset observe only the state
+        it keeps (the paper observation is the expensive part of a step).
         """
-        if params is None:
-            params = self.default_params
-        key_step, key_reset = jax.random.split(key)
-        _, state_st, reward, terminated, truncated, info = self.step_env(
-            key_step, state, action, params
-        )
-        done = jnp.logical_or(terminated, truncated)
-        next_state = select_tree(done, self.initial_state(key_reset, params), state_st)
-        info = dict(info)
-        info["final_observation"] = self.get_obs(state_st, params)
-        return self.get_obs(next_state, params), next_state, reward, terminated, truncated, info
+        return reset.initial_state(key, params, self.config.world)
 
     def step_env(self, key: jax.Array, state: CraftState, action: jax.Array, params: CraftParams):
         next_state = dynamics.transition(state, action)
@@ -135,7 +99,7 @@ def make_craft(
         max_steps = parse_int("max_steps", max_steps, 1, INT32_MAX)
     map_seed = parse_int("map_seed", map_seed, 0, INT32_MAX)
     env = CraftEnv(CraftConfig(task=task, observation=observation))
-    fixed_state = env.new_state(jax.random.key(map_seed)) if fixed_map else None
+    fixed_state = reset.new_state(jax.random.key(map_seed), env.config.world) if fixed_map else None
     return env, make_params(task, max_steps=max_steps, fixed_state=fixed_state)
 
 

@@ -46,7 +46,7 @@ import numpy as np
 
 from smjax.core import spaces
 from smjax.envs.craft import constants as C
-from smjax.envs.craft.structs import CraftState
+from smjax.envs.craft.types import CraftState
 
 N = C.GRID_SIZE
 K = C.NUM_KINDS

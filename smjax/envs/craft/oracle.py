@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.envs.craft import constants as C
-from smjax.envs.craft.structs import CraftParams, CraftState
+from smjax.envs.craft.types import CraftParams, CraftState
 
 N = C.GRID_SIZE
 INF = 1 << 20

@@ -17,7 +17,7 @@ import numpy as np
 
 from smjax.core.sampling import choose_uniform
 from smjax.envs.craft import constants as C
-from smjax.envs.craft.structs import CraftParams, CraftState
+from smjax.envs.craft.types import CraftParams, CraftState
 from smjax.options import Hierarchy, OptionTemplate, Parametric, declare
 
 N = C.GRID_SIZE

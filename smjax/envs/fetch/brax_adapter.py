@@ -14,7 +14,7 @@ import jax.numpy as jnp
 from brax.envs.base import Env, State
 
 from smjax.envs.fetch.env import FetchEnv
-from smjax.envs.fetch.state import FetchConfig
+from smjax.envs.fetch.types import FetchConfig
 
 
 class BraxFetchEnv(Env):

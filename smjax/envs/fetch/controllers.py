@@ -36,9 +36,9 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from smjax.envs.fetch import state as st
+from smjax.envs.fetch import types as st
 from smjax.envs.fetch.model import BLOCK_HALF, FINGER_RANGE
-from smjax.envs.fetch.state import FetchParams, FetchState
+from smjax.envs.fetch.types import FetchParams, FetchState
 
 GAIN = 15.0
 DEAD_BAND = 0.02

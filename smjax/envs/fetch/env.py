@@ -1,17 +1,18 @@
 """FetchEnv: stack N blocks into a tower with a floating MJX gripper.
 
-Action: float32[4] in [-1, 1] (clipped). ``a[:3]`` moves the mocap target of the grip
-point by ``action_scale`` (0.05 m) per step per unit, clamped to the workspace box; the
-target moves along a straight line over the substeps, so the gripper is dragged smoothly
-instead of jumping 5 cm in one physics step. ``a[3]`` moves both finger position targets
-by 0.05 m per unit (+1 opens fully, -1 closes fully in one step, 0 keeps the current
-target, so doing nothing keeps a grasp; the reference instead re-targets the current
-finger position, which loosens the grip when the action is 0).
+Action: float32[4] in [-1, 1] (``dynamics`` says what each entry does). Episodes:
+truncated after ``params.max_steps`` (50 N) steps; terminated only when the simulation
+diverges (the reference has no terminal state: a stacked tower must also be kept
+stacked). ``info``: ``score`` = (min(0, r) + N) / N, ``is_success`` = every block within
+0.04 m of its goal, ``placed`` = bool[N].
 
-Episodes: truncated after ``params.max_steps`` (50 N) steps; never terminated (the
-reference has no terminal state: a stacked tower must also be kept stacked).
-``info``: ``score`` = (min(0, r) + N) / N, ``is_success`` = every block within 0.04 m of
-its goal, ``placed`` = bool[N].
+The package's modules, one job each (the same names in every environment package):
+``types`` (state, params, static config, qpos accessors), ``reset`` (goal and block
+sampling, the initial state), ``dynamics`` (physics step, reward, score), ``observation``,
+``templates`` (option templates and hierarchies), ``render``, ``env`` (this class, its
+factory ``make_fetch`` and the task registration); and
+Fetch's own ``model`` (the MJCF scene), ``controllers`` (the templates' scripted
+controllers), ``scripted`` (the fully scripted hierarchy) and ``brax_adapter``.
 """
 from __future__ import annotations
 
@@ -22,11 +23,14 @@ from mujoco import mjx
 
 from smjax.core import spaces
 from smjax.core.env import Environment
+from smjax.core.overrides import INT32_MAX, parse_bool, parse_float, parse_int
+from smjax.core.registry import register
+from smjax.envs.fetch import dynamics, reset
 from smjax.envs.fetch import model as fm
-from smjax.envs.fetch import state as st
-from smjax.envs.fetch.observation import blocks_placed, observation, reward, score
-from smjax.envs.fetch.sampling import sample_blocks, sample_goals
-from smjax.envs.fetch.state import FetchConfig, FetchParams, FetchState
+from smjax.envs.fetch.model import MAX_BLOCKS, MIN_BLOCKS, PhysicsConfig, check_num_blocks
+from smjax.envs.fetch import types as st
+from smjax.envs.fetch.observation import observation
+from smjax.envs.fetch.types import FetchConfig, FetchParams, FetchState
 
 
 class FetchEnv(Environment[FetchState, FetchParams]):
@@ -49,7 +53,7 @@ class FetchEnv(Environment[FetchState, FetchParams]):
             [lo[0] + fm.WORKSPACE_XY, lo[1] + fm.WORKSPACE_XY, fm.WORKSPACE_Z[1]], jnp.float32)
 
     def _check_layout(self) -> None:
-        # state.py's accessors hard-code the qpos layout; fail loudly if the model drifts.
+        # types.py's accessors hard-code the qpos layout; fail loudly if the model drifts.
         idx = self.index
         expected = (st.GRIPPER_QPOS, st.GRIPPER_QVEL, (st.FINGER_QPOS, st.FINGER_QPOS + 1),
                     (st.FINGER_QVEL, st.FINGER_QVEL + 1),
@@ -74,76 +78,14 @@ class FetchEnv(Environment[FetchState, FetchParams]):
     def get_obs(self, state: FetchState, params: FetchParams | None = None) -> jax.Array:
         return observation(state, self.config)
 
-    def reset_env(self, key: jax.Array, params: FetchParams) -> tuple[jax.Array, FetchState]:
-        key_goal, key_blocks = jax.random.split(key)
-        goals = sample_goals(key_goal, params, self.num_blocks)
-        blocks_xy = sample_blocks(key_blocks, goals[0, :2], params, self.config)
-        start = jnp.asarray(fm.GRIPPER_START, jnp.float32)
-        n = self.num_blocks
-        block_qpos = jnp.concatenate(
-            [blocks_xy, jnp.full((n, 1), fm.BLOCK_REST_Z, jnp.float32),
-             jnp.tile(jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32), (n, 1))], axis=-1)
-        open_fingers = jnp.full((2,), fm.FINGER_RANGE[1], jnp.float32)
-        qpos = jnp.concatenate([
-            start, jnp.asarray([1.0, 0.0, 0.0, 0.0], jnp.float32), open_fingers,
-            block_qpos.ravel()])
-        data = self._data0.replace(
-            qpos=qpos,
-            qvel=jnp.zeros_like(self._data0.qvel),
-            ctrl=open_fingers,
-            mocap_pos=start[None, :],
-            mocap_quat=jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32),
-        )
-        data = mjx.forward(self.mjx_model, data)
-        state = FetchState(data=data, goals=goals, step=jnp.zeros((), jnp.int32),
-                           placed=jnp.zeros((n,), bool))
-        state = state.replace(placed=blocks_placed(state, params))
-        return observation(state, self.config), state
+    def initial_state(self, key: jax.Array, params: FetchParams) -> FetchState:
+        return reset.initial_state(key, params, self.config, self.mjx_model, self._data0)
 
     def step_env(self, key: jax.Array, state: FetchState, action: jax.Array,
                  params: FetchParams):
-        action = jnp.clip(jnp.asarray(action, jnp.float32).reshape(4), -1.0, 1.0)
-        data = state.data
-        old_target = data.mocap_pos[0]
-        new_target = jnp.clip(old_target + params.action_scale * action[:3],
-                              self._ws_low, self._ws_high)
-        ctrl = jnp.clip(data.ctrl + fm.FINGER_RANGE[1] * action[3],
-                        fm.FINGER_RANGE[0], fm.FINGER_RANGE[1])
-        data = data.replace(ctrl=ctrl)
-        substeps = self.config.physics.substeps
-
-        def substep(d, frac):
-            target = old_target + frac * (new_target - old_target)
-            d = d.replace(mocap_pos=target[None, :])
-            return mjx.step(self.mjx_model, d), None
-
-        fracs = jnp.arange(1, substeps + 1, dtype=jnp.float32) / substeps
-        data, _ = jax.lax.scan(substep, data, fracs)
-        new_state = FetchState(data=data, goals=state.goals, step=state.step + 1,
-                               placed=state.placed)
-        placed = blocks_placed(new_state, params)
-        new_state = new_state.replace(placed=placed)
-        r = reward(new_state, params)
-        # MJX has no divergence check of its own: a block squeezed between the fingers can
-        # blow up to inf/NaN, which would poison every learner fed this observation. Such
-        # an episode terminates (the auto-reset replaces it) with a finite observation and
-        # no reward and no score (a zero reward would read as "all placed"), and says so in
-        # info["physics_diverged"].
-        diverged = ~(jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
-                     & (jnp.abs(data.qvel).max() < 1e3))
-        episode_score = jnp.where(diverged, 0.0, score(r, self.num_blocks))
-        r = jnp.where(diverged, 0.0, r)
-        truncated = new_state.step >= params.max_steps
-        info = {
-            "score": episode_score,
-            # the trainers' per-episode success of the root option: the paper's score
-            "success": episode_score,
-            "is_success": jnp.all(placed),
-            "placed": placed,
-            "physics_diverged": diverged,
-        }
-        obs = jnp.nan_to_num(observation(new_state, self.config), posinf=0.0, neginf=0.0)
-        return obs, new_state, r, diverged, truncated, info
+        new_state, r, terminated, truncated, info = dynamics.step(
+            state, action, params, self.config, self.mjx_model, self._ws_low, self._ws_high)
+        return self.get_obs(new_state, params), new_state, r, terminated, truncated, info
 
     # ---- templates, hierarchies, rendering (other modules) ---------------------
     def templates(self) -> dict:
@@ -161,3 +103,53 @@ class FetchEnv(Environment[FetchState, FetchParams]):
         from smjax.envs.fetch.render import render_state
 
         return render_state(self, state, width=width, height=height)
+
+
+def make_fetch(
+    default_blocks: int,
+    *,
+    num_blocks: int | None = None,
+    substeps: int = PhysicsConfig.substeps,
+    timestep: float = PhysicsConfig.timestep,
+    solver_iterations: int = PhysicsConfig.solver_iterations,
+    ls_iterations: int = PhysicsConfig.ls_iterations,
+    obs_include_goals: bool = False,
+    max_steps: int | None = None,
+) -> tuple[FetchEnv, FetchParams]:
+    """Build (env, params) for N = ``num_blocks`` (or ``default_blocks``) blocks."""
+    n = check_num_blocks(default_blocks if num_blocks is None else
+                         parse_int("num_blocks", num_blocks, MIN_BLOCKS, MAX_BLOCKS))
+    # strict: a truncated 2.7 substeps or a NaN timestep would silently change the physics
+    physics = PhysicsConfig(timestep=parse_float("timestep", timestep, 0.0, 0.1, low_open=True),
+                            substeps=parse_int("substeps", substeps, 1, 1000),
+                            solver_iterations=parse_int("solver_iterations", solver_iterations, 1, 1000),
+                            ls_iterations=parse_int("ls_iterations", ls_iterations, 1, 1000))
+    env = FetchEnv(FetchConfig(num_blocks=n, physics=physics,
+                               obs_include_goals=parse_bool("obs_include_goals", obs_include_goals)))
+    params = env.default_params
+    if max_steps is not None:
+        steps = parse_int("max_steps", max_steps, 1, INT32_MAX)
+        params = params.replace(max_steps=jnp.asarray(steps, jnp.int32))
+    return env, params
+
+
+def _factory(default_blocks: int):
+    def factory(*, num_blocks: int | None = None, substeps: int = PhysicsConfig.substeps,
+                timestep: float = PhysicsConfig.timestep,
+                solver_iterations: int = PhysicsConfig.solver_iterations,
+                ls_iterations: int = PhysicsConfig.ls_iterations,
+                obs_include_goals: bool = False, max_steps: int | None = None):
+        return make_fetch(default_blocks, num_blocks=num_blocks, substeps=substeps,
+                          timestep=timestep, solver_iterations=solver_iterations,
+                          ls_iterations=ls_iterations, obs_include_goals=obs_include_goals,
+                          max_steps=max_steps)
+
+    return factory
+
+
+def register_all() -> None:
+    """Register ``fetch/stack1`` .. ``fetch/stack6``."""
+    for n in range(MIN_BLOCKS, MAX_BLOCKS + 1):
+        paper = " (paper)" if n in (3, 4) else ""
+        register(f"fetch/stack{n}", _factory(n),
+                 f"MJX gripper stacks {n} block(s) into a tower{paper}; num_blocks overrides N")

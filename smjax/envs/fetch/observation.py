@@ -1,6 +1,6 @@
-"""Observation (10 + 15N floats) and the incremental stacking reward.
+"""Observation (10 + 15N floats).
 
-Observation layout, the reference's (docs/environments.md, Fetch); velocities are
+Layout, the reference's (docs/environments.md, Fetch); velocities are
 displacements per env step, i.e. velocity x control dt, as in the reference:
 
   [0:3]  grip point position          [3:5]  finger openings (qpos)
@@ -15,11 +15,16 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from smjax.envs.fetch import state as st
-from smjax.envs.fetch.state import FetchConfig, FetchParams, FetchState
+from smjax.envs.fetch import types as st
+from smjax.envs.fetch.types import FetchConfig, FetchState
 
 
 def observation(state: FetchState, config: FetchConfig) -> jax.Array:
+    """float32[obs_size]; non-finite values (a diverged simulation) read as 0."""
+    return jnp.nan_to_num(raw_observation(state, config), posinf=0.0, neginf=0.0)
+
+
+def raw_observation(state: FetchState, config: FetchConfig) -> jax.Array:
     dt = config.physics.control_dt
     grip = st.gripper_pos(state)
     grip_vel = st.gripper_vel(state) * dt
@@ -41,28 +46,3 @@ def observation(state: FetchState, config: FetchConfig) -> jax.Array:
     if config.obs_include_goals:
         parts.append(state.goals.ravel())
     return jnp.concatenate(parts).astype(jnp.float32)
-
-
-def blocks_placed(state: FetchState, params: FetchParams) -> jax.Array:
-    """bool[N]: block i within ``success_distance`` of goal i."""
-    dist = jnp.linalg.norm(st.block_pos(state) - state.goals, axis=-1)
-    return dist < params.success_distance
-
-
-def gripper_clear(state: FetchState, params: FetchParams) -> jax.Array:
-    """True when the grip point is farther than ``clear_distance`` from every goal."""
-    dist = jnp.linalg.norm(state.goals - st.gripper_pos(state), axis=-1)
-    return jnp.all(dist > params.clear_distance)
-
-
-def reward(state: FetchState, params: FetchParams) -> jax.Array:
-    """-(blocks not placed); when all are placed, +1 if the gripper is clear of every goal."""
-    placed = blocks_placed(state, params)
-    missing = jnp.sum(~placed).astype(jnp.float32)
-    bonus = jnp.where(jnp.all(placed) & gripper_clear(state, params), 1.0, 0.0)
-    return -missing + bonus
-
-
-def score(reward_value: jax.Array, num_blocks: int) -> jax.Array:
-    """The reported score (min(0, r) + N) / N: the fraction of blocks in place."""
-    return (jnp.minimum(0.0, reward_value) + num_blocks) / num_blocks

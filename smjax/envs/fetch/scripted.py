@@ -16,7 +16,7 @@ from flax import struct
 
 from smjax.envs.fetch import controllers as ctl
 from smjax.envs.fetch import templates as tp
-from smjax.envs.fetch.observation import blocks_placed
+from smjax.envs.fetch.dynamics import blocks_placed
 
 SUB_REACH, SUB_PICK, SUB_RELEASE = 0, 1, 2
 _SUB_K_MAX = jnp.asarray([tp.K_MAX["reach"], tp.K_MAX["pick"], tp.K_MAX["release"]])

@@ -31,8 +31,8 @@ import jax
 import jax.numpy as jnp
 
 from smjax.envs.fetch import controllers as ctl
-from smjax.envs.fetch import state as st
-from smjax.envs.fetch.observation import blocks_placed
+from smjax.envs.fetch import types as st
+from smjax.envs.fetch.dynamics import blocks_placed
 from smjax.options import OptionTemplate, always, declare
 
 K_MAX = {"place": 80, "reach": 30, "pick": 50, "release": 30, "noop": 1}

@@ -30,7 +30,9 @@ from flax import struct
 
 from smjax.envs.football import constants as C
 from smjax.envs.football.physics import DIRS, dot2, min_axis, norm2, sum_axis
-from smjax.envs.football.state import FootballState, Noise, draw_noise, mirror_action, player_team, team_sign
+from smjax.envs.football.mirror import mirror_action
+from smjax.envs.football.noise import draw_noise
+from smjax.envs.football.types import FootballState, Noise, player_team, team_sign
 
 _DIRS8 = DIRS[1:]
 _FORM = jnp.asarray(C.FORMATION)

@@ -130,6 +130,6 @@ NUM_CHECKPOINTS = 10
 CHECKPOINT_REWARD = 0.1
 CHECKPOINT_THRESHOLDS = np.array([0.99 - 0.8 * k / 9 for k in range(NUM_CHECKPOINTS)], np.float32)
 
-# ---- random draws per tick (see state.Noise) --------------------------------
+# ---- random draws per tick (see types.Noise) --------------------------------
 NUM_UNIFORM = 8
 NUM_NORMAL = 3

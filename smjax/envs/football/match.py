@@ -5,7 +5,9 @@ import jax
 
 from smjax.envs.football.builtin_ai import all_actions
 from smjax.envs.football.rules import step_game
-from smjax.envs.football.state import FootballState, draw_noise, initial_state
+from smjax.envs.football.noise import draw_noise
+from smjax.envs.football.reset import initial_state
+from smjax.envs.football.types import FootballState
 
 
 def ai_tick(key: jax.Array, state: FootballState, difficulties: jax.Array) -> tuple[FootballState, jax.Array]:

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 
 from smjax.envs.football import constants as C
 from smjax.envs.football.physics import norm2
-from smjax.envs.football.state import FootballState, player_team
+from smjax.envs.football.types import FootballState, player_team
 
 OBSERVATION_SIZES = {"simple115": 115, "paper": 139}
 _ROLES = jnp.asarray(C.ROLES, jnp.float32) / 9.0

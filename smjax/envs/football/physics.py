@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.envs.football import constants as C
-from smjax.envs.football.state import FootballState, Noise, player_team, team_sign
+from smjax.envs.football.types import FootballState, Noise, player_team, team_sign
 
 DIRS = jnp.asarray(C.DIRECTION_VECTORS)
 

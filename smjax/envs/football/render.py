@@ -8,7 +8,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from smjax.envs.football import constants as C
-from smjax.envs.football.state import FootballState
+from smjax.envs.football.types import FootballState
 
 WIDTH, HEIGHT, MARGIN = 480, 232, 20
 LEFT_COLOUR, RIGHT_COLOUR = (230, 60, 50), (60, 110, 240)

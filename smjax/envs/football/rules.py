@@ -40,7 +40,8 @@ from smjax.core.env import select_tree
 from smjax.envs.football import constants as C
 from smjax.envs.football import physics
 from smjax.envs.football.physics import norm2
-from smjax.envs.football.state import FootballState, Noise, kickoff, player_team, team_sign
+from smjax.envs.football.reset import kickoff
+from smjax.envs.football.types import FootballState, Noise, player_team, team_sign
 
 _IDX = jnp.arange(C.NUM_TOTAL)
 _TEAM_OF = _IDX // C.NUM_PLAYERS

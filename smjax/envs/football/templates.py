@@ -40,7 +40,7 @@ import jax.numpy as jnp
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import _lane_blockers, quantize_direction
 from smjax.envs.football.physics import DIRS, dot2, norm2
-from smjax.envs.football.state import FootballState
+from smjax.envs.football.types import FootballState
 from smjax.options import OptionTemplate, declare
 
 K_MAX = 200

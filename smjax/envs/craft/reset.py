@@ -1,4 +1,5 @@
-"""World generation, exactly the reference's order, at a cost that fits inside every step.
+"""Craft's episode starts: world generation (the reference's order, at a cost that fits
+inside every step) and the initial state (a fresh world, or the fixed map of the params).
 
 Order (docs/environments.md, Craft): for island/cave tasks the treasure at (x0, 1) with x0
 uniform in 1..10, every empty cell of its 3 x 3 neighbourhood becomes water (gold) or stone
@@ -21,8 +22,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from smjax.core.env import select_tree
 from smjax.core.sampling import key_words
 from smjax.envs.craft import constants as C
+from smjax.envs.craft.types import CraftParams, CraftState
 
 N = C.GRID_SIZE
 NUM_RESOURCES_EACH = 4
@@ -139,3 +142,28 @@ def generate(key: jax.Array, world: str) -> tuple[jax.Array, jax.Array]:
     flat = flat.at[cells].set(jnp.asarray(PLACED_KINDS), unique_indices=True)
     pos = jnp.stack([xs[-1], ys[-1]]).astype(jnp.int32)
     return flat.reshape(N, N), pos
+
+
+def new_state(key: jax.Array, world: str) -> CraftState:
+    """A freshly generated world (``world`` static: "plain", "island" or "cave")."""
+    grid, pos = generate(key, world)
+    return CraftState(
+        grid=grid,
+        pos=pos,
+        direction=jnp.int32(C.DOWN),
+        inventory=jnp.zeros(C.NUM_KINDS, jnp.int32),
+        step=jnp.int32(0),
+    )
+
+
+def initial_state(key: jax.Array, params: CraftParams, world: str) -> CraftState:
+    """The state an episode starts from: a fresh world, or the fixed map if the params hold one."""
+    fresh = new_state(key, world)
+    fixed = CraftState(
+        grid=params.fixed_grid,
+        pos=params.fixed_pos,
+        direction=params.fixed_direction,
+        inventory=jnp.zeros(C.NUM_KINDS, jnp.int32),
+        step=jnp.int32(0),
+    )
+    return select_tree(params.use_fixed_map, fixed, fresh)

@@ -12,7 +12,7 @@ import pytest
 
 import smjax
 from smjax.envs.craft import constants as C
-from smjax.envs.craft import worldgen
+from smjax.envs.craft import reset
 
 N = C.GRID_SIZE
 RESOURCES = ("iron", "grass", "wood", "rock")
@@ -20,7 +20,7 @@ RESOURCES = ("iron", "grass", "wood", "rock")
 
 def generate_many(world: str, count: int, seed: int = 0):
     keys = jax.random.split(jax.random.PRNGKey(seed), count)
-    grids, pos = jax.jit(jax.vmap(lambda k: worldgen.generate(k, world)))(keys)
+    grids, pos = jax.jit(jax.vmap(lambda k: reset.generate(k, world)))(keys)
     return np.asarray(grids), np.asarray(pos)
 
 
@@ -87,14 +87,14 @@ def test_placements_are_spread_uniformly():
 
 
 def test_same_key_same_world_different_keys_differ():
-    a, pa = worldgen.generate(jax.random.PRNGKey(7), "cave")
-    b, pb = worldgen.generate(jax.random.PRNGKey(7), "cave")
-    c, _ = worldgen.generate(jax.random.PRNGKey(8), "cave")
+    a, pa = reset.generate(jax.random.PRNGKey(7), "cave")
+    b, pb = reset.generate(jax.random.PRNGKey(7), "cave")
+    c, _ = reset.generate(jax.random.PRNGKey(8), "cave")
     np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     np.testing.assert_array_equal(np.asarray(pa), np.asarray(pb))
     assert not np.array_equal(np.asarray(a), np.asarray(c))
     # Typed keys work and give the same world as the raw key with the same bits.
-    d, _ = worldgen.generate(jax.random.wrap_key_data(jax.random.PRNGKey(7)), "cave")
+    d, _ = reset.generate(jax.random.wrap_key_data(jax.random.PRNGKey(7)), "cave")
     np.testing.assert_array_equal(np.asarray(a), np.asarray(d))
 
 
@@ -103,7 +103,7 @@ def test_world_kind_per_task():
     assert C.world_kind("get_gem") == "cave"
     assert C.world_kind("make_axe") == "plain" and C.world_kind("make_bridge") == "plain"
     with pytest.raises(ValueError, match="world"):
-        worldgen.generate(jax.random.PRNGKey(0), "desert")
+        reset.generate(jax.random.PRNGKey(0), "desert")
 
 
 def test_reset_faces_down_with_empty_inventory():

@@ -1,4 +1,5 @@
-"""Reset distributions: a tower of goals and blocks scattered on the table.
+"""Episode starts: a tower of goals, blocks scattered on the table, the gripper at its
+start with open fingers (``initial_state``), and the distributions they are drawn from.
 
 * goal_0 = gripper start xy + U(-r, r)^2 on the table (z of a block resting on it),
   goal_i = goal_0 + i * 0.05 z (a tower).
@@ -20,9 +21,12 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from mujoco import mjx
 
+from smjax.envs.fetch import model as fm
+from smjax.envs.fetch.dynamics import blocks_placed
 from smjax.envs.fetch.model import BLOCK_HALF, BLOCK_REST_Z, GRIPPER_START
-from smjax.envs.fetch.state import FetchConfig, FetchParams
+from smjax.envs.fetch.types import FetchConfig, FetchParams, FetchState
 
 
 def sample_goals(key: jax.Array, params: FetchParams, num_blocks: int) -> jax.Array:
@@ -58,3 +62,35 @@ def sample_blocks(
         pick = jnp.where(jnp.any(ok), first_ok, c - 1)
         chosen.append(cand[pick])
     return jnp.stack(chosen)
+
+
+def initial_state(key: jax.Array, params: FetchParams, config: FetchConfig,
+                  mjx_model: mjx.Model, data0: mjx.Data) -> FetchState:
+    """A fresh episode: goals and blocks drawn, gripper at its start, fingers open, at rest.
+
+    ``data0`` is ``mjx.make_data(mjx_model)``; the kinematics are computed
+    (``mjx.forward``) so the state can be observed before the first step.
+    """
+    key_goal, key_blocks = jax.random.split(key)
+    goals = sample_goals(key_goal, params, config.num_blocks)
+    blocks_xy = sample_blocks(key_blocks, goals[0, :2], params, config)
+    start = jnp.asarray(fm.GRIPPER_START, jnp.float32)
+    n = config.num_blocks
+    block_qpos = jnp.concatenate(
+        [blocks_xy, jnp.full((n, 1), fm.BLOCK_REST_Z, jnp.float32),
+         jnp.tile(jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32), (n, 1))], axis=-1)
+    open_fingers = jnp.full((2,), fm.FINGER_RANGE[1], jnp.float32)
+    qpos = jnp.concatenate([
+        start, jnp.asarray([1.0, 0.0, 0.0, 0.0], jnp.float32), open_fingers,
+        block_qpos.ravel()])
+    data = data0.replace(
+        qpos=qpos,
+        qvel=jnp.zeros_like(data0.qvel),
+        ctrl=open_fingers,
+        mocap_pos=start[None, :],
+        mocap_quat=jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32),
+    )
+    data = mjx.forward(mjx_model, data)
+    state = FetchState(data=data, goals=goals, step=jnp.zeros((), jnp.int32),
+                       placed=jnp.zeros((n,), bool))
+    return state.replace(placed=blocks_placed(state, params))
