@@ -1,0 +1,113 @@
+"""Where a trained hierarchy's teleport-free episodes end: per seed, the share with a
+positive return, the return's distribution, episode lengths and episodes still running
+at the tick cap.
+
+    python benchmarks/diagnose_hierarchy.py RUN_DIR [--episodes 1024] [--policy sample]
+        [--max-ticks 2000] [--json OUT.json]
+
+RUN_DIR is a finished ``smjax train ... --out RUN_DIR``. Every seed's hierarchy runs alone
+(root on the stack, no teleports, nobody learning), as the final evaluation does, and
+each environment's first episode counts.
+
+Reading it on Craft: an episode's return is ``max(0, [goal held] - 0.1 x other items
+held)`` at its end, so a positive return means the goal was reached, and ``(1 - return)
+/ 0.1`` is the number of other items still held (get_gem keeps its axe: 1 at best).
+Episodes with return 0 either ran into the step cap or ended holding ten items or more.
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from smjax.options.runner import NO_OPTION, Controls
+from smjax.train.engine import EVAL_TEMPERATURES
+from smjax.train.policy import load_trained
+
+
+def episodes_program(engine, num_envs: int, max_ticks: int):
+    """jit(vmap over seeds) of: run ``num_envs`` environments until each has finished one
+    episode; per environment (return, success, length in ticks, finished)."""
+    runner = engine.episode_runner
+    dummy = engine.agent.init(jax.random.key(0), engine.example_obs, engine.num_actions)
+
+    def one_seed(key, bank, learned, temperature):
+        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
+                            temperature=temperature)
+        k_reset, key = jax.random.split(key)
+        carry = runner.reset(k_reset, controls, num_envs)
+        zeros = jnp.zeros((num_envs,), jnp.float32)
+
+        def cond(c):
+            return ~c[2].all() & (c[6] < max_ticks)
+
+        def body(c):
+            carry, key, done, ret, success, length, t = c
+            key, k = jax.random.split(key)
+            carry, _, ends = runner.tick(carry, k, dummy, bank, controls)
+            first = ends.finished & ~done
+            return (carry, key, done | ends.finished, jnp.where(first, ends.ret, ret),
+                    jnp.where(first, ends.success, success), jnp.where(first, t + 1, length),
+                    t + 1)
+
+        init = (carry, key, jnp.zeros((num_envs,), bool), zeros, zeros,
+                jnp.zeros((num_envs,), jnp.int32), jnp.asarray(0))
+        _, _, done, ret, success, length, _ = jax.lax.while_loop(cond, body, init)
+        return ret, success, length, done
+
+    return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, None)))
+
+
+def summarize(ret, success, length, done) -> dict:
+    """One seed's episodes as numbers a reader can act on."""
+    ret, success, length, done = (np.asarray(x) for x in (ret, success, length, done))
+    positive = done & (ret > 0)
+    rounded = collections.Counter(np.round(ret[done], 2).tolist())
+    return {
+        "success": float(success.mean()),
+        "return": float(ret.mean()),
+        "positive_return": float(positive.mean()),
+        "unfinished": float((~done).mean()),
+        "return_histogram": {f"{k:.2f}": v for k, v in sorted(rounded.items())},
+        "length_positive_median": float(np.median(length[positive])) if positive.any() else None,
+        "length_positive_p90": float(np.percentile(length[positive], 90)) if positive.any() else None,
+        "length_zero_median": (float(np.median(length[done & (ret <= 0)]))
+                               if (done & (ret <= 0)).any() else None),
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("run_dir")
+    parser.add_argument("--episodes", type=int, default=1024, help="episodes per seed")
+    parser.add_argument("--policy", default="sample", choices=sorted(EVAL_TEMPERATURES))
+    parser.add_argument("--max-ticks", type=int, default=2000)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", help="also write the report here")
+    args = parser.parse_args(argv)
+    if args.episodes < 1 or args.max_ticks < 1:
+        parser.error("--episodes and --max-ticks must be >= 1")
+    engine, bank, learned, seeds = load_trained(args.run_dir)
+    program = episodes_program(engine, args.episodes, args.max_ticks)
+    keys = jax.random.split(jax.random.key(args.seed), len(seeds))
+    out = program(keys, bank, learned, jnp.asarray(EVAL_TEMPERATURES[args.policy], jnp.float32))
+    per_seed = [summarize(*(x[i] for x in out)) for i in range(len(seeds))]
+    report = {"run_dir": str(args.run_dir), "policy": args.policy, "episodes": args.episodes,
+              "seeds": seeds, "per_seed": per_seed,
+              "mean": {k: float(np.mean([p[k] for p in per_seed]))
+                       for k in ("success", "return", "positive_return", "unfinished")}}
+    text = json.dumps(report, indent=1)
+    print(text)
+    if args.json:
+        Path(args.json).write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
