@@ -175,3 +175,43 @@ def test_failed_condition_pops_without_reward():
     # pushed; popped by `failed` once t = 2; called again, it fails again at once
     assert depths == [2, 1, 1]
     assert (np.asarray(carry.env_state.pos) == 3).all()  # its controller still walked each tick
+
+
+@pytest.mark.parametrize("switch", [None, False, True])
+def test_side_cost_shapes_only_a_template_learners_reward_and_only_when_asked(switch):
+    """Reward = F_o + c(s) - gamma * c(s') with the switch on; F_o alone otherwise; the
+    recorded success stays F_o either way."""
+    import dataclasses
+    env = KeyDoor()
+    h = env.hierarchies()["paper"]
+    cost = lambda s, p: 0.1 * s.t.astype(jnp.float32) + 0.05  # noqa: E731 - grows every tick
+    tpls = {**h.templates, "give_key": dataclasses.replace(h.templates["give_key"], side_cost=cost)}
+    h = dataclasses.replace(h, templates=tpls)
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(2, h.num_actions), gamma=GAMMA,
+                             frozen_policy="greedy")
+    on = None if switch is None else jnp.asarray(switch)
+    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, False]), side_cost=on)
+    carry = runner.reset(jax.random.PRNGKey(0), controls, B)
+    carry = carry.replace(env_state=carry.env_state.replace(pos=carry.env_state.key_pos,
+                                                            t=jnp.full((B,), 3)))
+    bank = np.zeros((2, 4))
+    bank[0, 3] = 5.0  # the learned root calls give_key, the learner, which is satisfied at once
+    _, tr, ends = runner.tick(carry, jax.random.PRNGKey(3), None, jnp.asarray(bank, jnp.float32),
+                              controls)
+    shaped = 1.0 + (0.1 * 3 + 0.05) - GAMMA * (0.1 * 4 + 0.05)
+    np.testing.assert_allclose(np.asarray(tr.reward), shaped if switch else 1.0, rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(ends.success), 1.0)
+
+
+def test_craft_side_cost_charges_items_other_than_the_promised_one():
+    from smjax.envs.craft import constants as C
+    from smjax.envs.craft.templates import make_templates
+    import smjax
+    env, params = smjax.make("craft/get_gem", observation="none")
+    state = env.initial_state(jax.random.PRNGKey(0), params)
+    inv = state.inventory.at[C.KIND_ID["wood"]].set(2).at[C.KIND_ID["iron"]].set(1)
+    state = state.replace(inventory=inv)
+    tpls = make_templates()
+    np.testing.assert_allclose(float(tpls["give_wood"].side_cost(state, params)), 0.1)
+    np.testing.assert_allclose(float(tpls["give_iron"].side_cost(state, params)), 0.2)
+    np.testing.assert_allclose(float(tpls["give_axe"].side_cost(state, params)), 0.3)

@@ -123,6 +123,8 @@ class Controls:
       as the runner was built); its next episode starts where the levels above call it again.
     temperature: float, how frozen policies pick: 0 greedy (argmax), else a sample at this
       temperature (None: as the runner was built).
+    side_cost: bool, a template learner is also rewarded by the decrease of its template's
+      ``side_cost`` (None: never; fine-tuning turns it on).
     """
 
     learner: jax.Array
@@ -131,6 +133,7 @@ class Controls:
     teleport: jax.Array | None = None
     continue_episodes: jax.Array | None = None
     temperature: jax.Array | None = None
+    side_cost: jax.Array | None = None
 
 
 class HierarchyRunner:
@@ -181,6 +184,12 @@ class HierarchyRunner:
     def _satisfied(self, state) -> jax.Array:
         vals = [jnp.asarray(False)] + [t.satisfied(state, self.env_params) for t in self.templates]
         return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
+
+    def _side_cost(self, state) -> jax.Array:
+        vals = [jnp.asarray(0.0)] + [
+            t.side_cost(state, self.env_params) if t.side_cost is not None else jnp.asarray(0.0)
+            for t in self.templates]
+        return jnp.stack([jnp.asarray(v, jnp.float32).reshape(()) for v in vals])
 
     def _failed(self, state) -> jax.Array:
         vals = [jnp.asarray(False)] + [
@@ -349,6 +358,8 @@ class HierarchyRunner:
         )
         tp_steps = jnp.where(teleported >= 0, self.nominal[jnp.maximum(teleported, 0)], 1.0)
         discount = self.gamma ** tp_steps
+        shaping = self._side_cost_shaping(carry.env_state, state, discount, learner_on,
+                                          learner_idx, is_root, controls)
         # In evaluation (no learner) the whole episode counts, with the environment's reward.
         started = carry.learner_started | decided | (controls.learner < 0)
         ep_return = carry.learner_return + jnp.where(started, learner_reward, 0.0)
@@ -372,7 +383,8 @@ class HierarchyRunner:
         )
         transition = Transition(
             obs=carry.obs, action=act.action, action_mask=learner_mask, log_prob=act.log_prob,
-            value=act.value, decision=decided, reward=jnp.where(started, learner_reward, 0.0),
+            value=act.value, decision=decided,
+            reward=jnp.where(started, learner_reward + shaping, 0.0),
             discount=discount, done=learner_done,
         )
         # Success of a finished episode: the template's F_o (its return) for a template
@@ -392,6 +404,18 @@ class HierarchyRunner:
             task_end=task_end, task_success=jnp.where(task_end, task_success, 0.0),
         )
         return new_carry, transition, ends
+
+    def _side_cost_shaping(self, before, after, discount, learner_on, learner_idx, is_root,
+                           controls: Controls):
+        """A template learner's extra reward ``c(s) - discount * c(s')`` for its template's
+        ``side_cost`` c, where ``controls.side_cost`` asks for it (0 elsewhere). Summed over
+        the option's run it telescopes to minus the discounted cost it ends with, above what
+        it started with."""
+        if controls.side_cost is None or not any(t.side_cost is not None for t in self.templates):
+            return 0.0
+        c0 = jax.vmap(self._side_cost)(before)[:, learner_idx]
+        c1 = jax.vmap(self._side_cost)(after)[:, learner_idx]
+        return jnp.where(controls.side_cost & learner_on & ~is_root, c0 - discount * c1, 0.0)
 
     def _act_frozen(self, learner_state, obs, mask, key, controls: Controls) -> ActOutput:
         """The learner picks as the bank will run it once frozen (the level's gate); with no

@@ -69,6 +69,12 @@ class OptionTemplate:
       nominal_steps: d, the duration a teleported call stands for; the caller's SMDP
         discount for a teleport is gamma**d (the reference's gamma^d per template).
       description: one line for docs and ``--help``.
+      side_cost: optional cost of what a state holds beyond the template's promise (a
+        teleport lands with none of it; Craft: 0.1 per unit of items other than the one
+        promised). Where the trainer asks (fine-tuning, ``TrainConfig.finetune_side_cost``)
+        a learner of this template is also rewarded by its discounted decrease (potential
+        shaping), so what its run leaves behind costs it as the task's reward would; its
+        F_o success is unchanged.
     """
 
     name: str
@@ -80,6 +86,7 @@ class OptionTemplate:
     controller: Optional[ControllerFn] = None
     nominal_steps: int = 1
     description: str = ""
+    side_cost: Optional[StateFn] = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:

@@ -89,6 +89,10 @@ class TrainConfig:
         hierarchy calls it) that ends its turn early.
       finetune_turn_episodes: environment episodes of one option's turn at most.
       finetune_max_episodes: the phase's budget in environment episodes, per seed.
+      finetune_side_cost: while fine-tuning, a template learner is also rewarded by the
+        decrease of its template's ``side_cost`` where the environment defines one (Craft:
+        items held beyond the one promised), so its run stops leaving behind what the task's
+        reward penalises; F_o success and the levels are unchanged.
       checkpoint_every: seconds between checkpoints when an output directory is given
         (0: after every chunk); a checkpoint is also written at the end of every level.
     """
@@ -119,6 +123,7 @@ class TrainConfig:
     finetune_option_threshold: float = 0.95
     finetune_turn_episodes: int = 2_000
     finetune_max_episodes: int = 20_000
+    finetune_side_cost: bool = True
     checkpoint_every: float = 60.0
     tensorboard: bool = False
     agent: dict = field(default_factory=dict)
@@ -162,6 +167,7 @@ class TrainConfig:
         need(isinstance(self.tensorboard, bool), "tensorboard", "true or false")
         need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
         need(isinstance(self.gate, bool), "gate", "true or false")
+        need(isinstance(self.finetune_side_cost, bool), "finetune_side_cost", "true or false")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
         if "gamma" in self.agent:  # one source: the trainer discounts with TrainConfig.gamma
             raise ConfigError(f"agent field 'gamma' = {self.agent['gamma']!r} would be ignored: the "

@@ -122,11 +122,13 @@ class Engine:
 
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
     def _chunk(self, state: SeedState, active, bank, learned, learner, start, teleport,
-               continue_episodes):
-        """``teleport``/``continue_episodes``: the levels' setting (teleports on, episodes
-        reset with the learner's option unless ``TrainConfig.continue_episodes``) or
-        fine-tuning's (the learned hierarchy alone, whole task episodes)."""
-        controls = Controls(learner, start, learned, teleport, continue_episodes)
+               continue_episodes, side_cost):
+        """``teleport``/``continue_episodes``/``side_cost``: the levels' setting (teleports
+        on, episodes reset with the learner's option unless ``TrainConfig.continue_episodes``,
+        no side-cost shaping) or fine-tuning's (the learned hierarchy alone, whole task
+        episodes, side costs as ``TrainConfig.finetune_side_cost`` says)."""
+        controls = Controls(learner, start, learned, teleport, continue_episodes,
+                            side_cost=side_cost)
         runner, agent, cfg = self.runner, self.agent, self.cfg
 
         def update_step(st: SeedState, _):

@@ -263,8 +263,9 @@ class HierarchyTrainer(ft.FinetunePhase):
         tuning = [self._finetuning(s) for s in range(S)]
         teleport = self._per_seed([not t for t in tuning], bool)
         keep = self._per_seed([t or self.cfg.continue_episodes for t in tuning], bool)
+        side_cost = self._per_seed([t and self.cfg.finetune_side_cost for t in tuning], bool)
         args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
-                learner, start, teleport, keep)
+                learner, start, teleport, keep, side_cost)
         if self._compiled is None:  # one compile serves every level (ids are traced)
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()

@@ -70,6 +70,17 @@ def _held_fn(item_id: int, held: bool) -> Callable:
     return fn
 
 
+def _side_cost_fn(item_id: int) -> Callable:
+    # the task's reward takes 0.1 per unit of any item held but the goal: a give_X run that
+    # ends holding more than its teleport would have (X) is charged the same way
+    others = np.ones(C.NUM_KINDS, np.float32)
+    others[item_id] = 0.0
+
+    def fn(state: CraftState, params: CraftParams) -> jax.Array:
+        return 0.1 * jnp.sum(state.inventory.astype(jnp.float32) * others)
+    return fn
+
+
 def make_templates() -> dict[str, OptionTemplate]:
     """``give_<item>`` for the 6 primitives and 18 crafted items."""
     out = {}
@@ -85,6 +96,7 @@ def make_templates() -> dict[str, OptionTemplate]:
             teleport=Parametric(give_teleport, teleport_data(item)),
             nominal_steps=C.NOMINAL_STEPS[item],
             description=f"obtain one {item} {how}".strip(),
+            side_cost=_side_cost_fn(item_id),
         )
     return out
 
