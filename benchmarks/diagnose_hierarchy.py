@@ -26,16 +26,28 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from smjax.envs.craft import constants as C
 from smjax.options.runner import NO_OPTION, Controls
+from smjax.options.stack import stack_top
 from smjax.train.engine import EVAL_TEMPERATURES
 from smjax.train.policy import load_trained
 
 
+def _inventory(state):
+    """Item counts [B, K] where the state has an inventory (Craft), else None."""
+    inv = getattr(state, "inventory", None)
+    return None if inv is None else inv.astype(jnp.float32)
+
+
 def episodes_program(engine, num_envs: int, max_ticks: int):
     """jit(vmap over seeds) of: run ``num_envs`` environments until each has finished one
-    episode; per environment (return, success, length in ticks, finished)."""
+    episode; per environment (return, success, length in ticks, finished), and, where the
+    state has an inventory, the units of each item gained per option [O, K] (summed over
+    first episodes; a gain counts for the option on top of the stack when the tick starts,
+    so a call's first step counts for its caller; an episode's last step is not seen)."""
     runner = engine.episode_runner
     dummy = engine.agent.init(jax.random.key(0), engine.example_obs, engine.num_actions)
+    O = engine.h.num_options
 
     def one_seed(key, bank, learned, temperature):
         controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
@@ -48,18 +60,25 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             return ~c[2].all() & (c[6] < max_ticks)
 
         def body(c):
-            carry, key, done, ret, success, length, t = c
+            carry, key, done, ret, success, length, t, gains = c
             key, k = jax.random.split(key)
+            before, top = _inventory(carry.env_state), jax.vmap(stack_top)(carry.stack)
             carry, _, ends = runner.tick(carry, k, dummy, bank, controls)
+            if before is not None:
+                counted = (~ends.reset & ~done)[:, None]
+                gain = jnp.where(counted, jnp.maximum(_inventory(carry.env_state) - before, 0), 0)
+                gains = gains + jax.nn.one_hot(jnp.maximum(top, 0), O).T @ gain
             first = ends.finished & ~done
             return (carry, key, done | ends.finished, jnp.where(first, ends.ret, ret),
                     jnp.where(first, ends.success, success), jnp.where(first, t + 1, length),
-                    t + 1)
+                    t + 1, gains)
 
+        inv = _inventory(carry.env_state)
+        gains = jnp.zeros((O, 0 if inv is None else inv.shape[-1]), jnp.float32)
         init = (carry, key, jnp.zeros((num_envs,), bool), zeros, zeros,
-                jnp.zeros((num_envs,), jnp.int32), jnp.asarray(0))
-        _, _, done, ret, success, length, _ = jax.lax.while_loop(cond, body, init)
-        return ret, success, length, done
+                jnp.zeros((num_envs,), jnp.int32), jnp.asarray(0), gains)
+        _, _, done, ret, success, length, _, gains = jax.lax.while_loop(cond, body, init)
+        return ret, success, length, done, gains / num_envs
 
     return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, None)))
 
@@ -97,9 +116,15 @@ def main(argv=None) -> int:
     program = episodes_program(engine, args.episodes, args.max_ticks)
     keys = jax.random.split(jax.random.key(args.seed), len(seeds))
     out = program(keys, bank, learned, jnp.asarray(EVAL_TEMPERATURES[args.policy], jnp.float32))
-    per_seed = [summarize(*(x[i] for x in out)) for i in range(len(seeds))]
+    per_seed = [summarize(*(x[i] for x in out[:4])) for i in range(len(seeds))]
+    gains = np.asarray(out[4]).mean(0)  # [O, K], mean over seeds, per episode
+    names = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names
+    picked = {engine.h.option_names[o]: {(names[k] if names else str(k)): round(float(v), 3)
+                                         for k, v in enumerate(gains[o]) if v >= 0.005}
+              for o in range(gains.shape[0]) if gains[o].sum() >= 0.005}
     report = {"run_dir": str(args.run_dir), "policy": args.policy, "episodes": args.episodes,
               "seeds": seeds, "per_seed": per_seed,
+              "gained_per_episode_by_option": picked,
               "mean": {k: float(np.mean([p[k] for p in per_seed]))
                        for k in ("success", "return", "positive_return", "unfinished")}}
     text = json.dumps(report, indent=1)
