@@ -70,7 +70,7 @@ def _add_train(sub):
                         "--set 'levels={\"attack\": {\"max_steps_per_level\": 1500000}}'")
     p.add_argument("--finetune", choices=("on", "off", "auto"), default=None,
                    help="after the levels, fine-tune the learned hierarchy without teleports until "
-                        "its task success passes --set finetune_threshold (0.9) (default auto: on "
+                        "its task success passes --set finetune_threshold (0.92) (default auto: on "
                         "for top-down; docs/guide.md, 'Fine-tuning')")
     p.add_argument("--finetune-episodes", type=int, default=None, metavar="N",
                    help="fine-tuning's episode budget per seed (default 20000)")
