@@ -104,8 +104,12 @@ class HierarchyTrainer(ft.FinetunePhase):
     """Trains every planned level for all seeds, each seed at its own pace; resumable."""
 
     def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
-                 out_dir=None, progress: bool = True, run_meta: dict | None = None):
+                 out_dir=None, progress: bool = True, run_meta: dict | None = None,
+                 hp: dict | None = None):
+        """``seeds``: one per slot (a sweep repeats them, once per point); ``hp``: per slot,
+        the learner's sweepable hyper-parameters that differ from its config (a sweep)."""
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
+        self.slot_hp = {k: jnp.asarray(v, jnp.float32) for k, v in (hp or {}).items()}
         self.cfg = engine.cfg
         self.cfg.check_level_names([p.name for p in plans])
         # after the levels, a seed fine-tunes (one stage more) unless it is off
@@ -118,7 +122,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         S = len(self.seeds)
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
         keys, k_init, k_reset = split_seeds(keys, 3)
-        learner = engine.init_learner(k_init)
+        learner = self._init_learner(k_init)
         self.arrays = {
             "keys": keys,
             "state": SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
@@ -295,7 +299,9 @@ class HierarchyTrainer(ft.FinetunePhase):
         self.host["wall_seconds"] = time.perf_counter() - t_start
         if self._tb is not None:
             self._tb.close()
-        return {"levels": self.host["levels"], "curves": self.host["curves"],
+        # a curve row's 7th entry is its slot (a sweep splits the rows by point)
+        return {"levels": self.host["levels"], "curves": [r[:6] for r in self.host["curves"]],
+                "curve_slots": [r[6] if len(r) > 6 else None for r in self.host["curves"]],
                 "final": by_policy[self.engine.frozen_policy], "final_by_policy": by_policy,
                 "eval_policy": self.engine.frozen_policy,
                 "finetune": self.host["finetune"] if self.ft_order else None,
@@ -314,7 +320,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         arrays = jax.tree.map(local, self.arrays)
         keys, k_init, k_reset, k_run = split_seeds(arrays["keys"], 4)
         starts = jnp.asarray([self._plan(s).start for s in range(len(self.seeds))], jnp.int32)
-        learner = self.engine.init_learner(k_init)
+        learner = self._init_learner(k_init)
         tuning = [s for s in seeds if self._finetuning(s)]
         if tuning:
             options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
@@ -329,6 +335,13 @@ class HierarchyTrainer(ft.FinetunePhase):
             for k, v in LEVEL_COUNTERS.items():
                 self.host[k][s] = [] if k == "history" else v
             self.host["started"][s] = True
+
+    def _init_learner(self, keys: jax.Array):
+        """Fresh learners per slot, with each slot's swept hyper-parameters."""
+        learner = self.engine.init_learner(keys)
+        if self.slot_hp:
+            learner = learner.replace(hp={**learner.hp, **self.slot_hp})
+        return learner
 
     def _mask(self, seeds: list[int]) -> jax.Array:
         return jnp.asarray([s in seeds for s in range(len(self.seeds))])
@@ -358,7 +371,7 @@ class HierarchyTrainer(ft.FinetunePhase):
                 host["running"][s] = None if math.isnan(run) else run
                 if not self._finetuning(s):  # (fine-tuning records the task's curve)
                     host["curves"].append([seed, plan.level, plan.name, host["episodes"][s],
-                                           host["env_steps"][s], host["running"][s]])
+                                           host["env_steps"][s], host["running"][s], s])
                 if self._tb is not None and host["running"][s] is not None:
                     tag = f"seed_{seed}/level_{plan.level}_{plan.name}"
                     self._tb.add_scalar(f"{tag}/running_success", host["running"][s],

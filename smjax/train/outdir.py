@@ -22,7 +22,8 @@ from pathlib import Path
 
 LOCK_NAME = ".smjax.lock"
 # what a run writes into its directory; --overwrite deletes exactly these
-RUN_FILES = ("results.json", "curves.csv", "curves.png", "checkpoints", "tensorboard")
+RUN_FILES = ("results.json", "curves.csv", "curves.png", "checkpoints", "tensorboard",
+             "sweep.json")
 
 
 class OutDirError(ValueError):

@@ -1,0 +1,109 @@
+"""Hyper-parameter sweeps in one compiled program.
+
+A sweep ``{"agent.learning_rate": [1e-4, 3e-4], "agent.ent_coef": [0.0, 0.01]}`` trains
+the cartesian product of the lists (its *points*) for every seed. Each (point, seed) pair
+is one slot of the seed axis: the slot's keys come from its seed alone and its swept
+values live in its learner state (``state.hp``, see :mod:`smjax.agents.base`), so every
+slot computes exactly what that point's run alone would give for that seed, and the whole
+sweep compiles once. Slots are point-major: slot ``p * len(seeds) + i`` is point ``p``,
+seed ``seeds[i]``.
+
+Only the fields a learner declares ``sweepable`` may vary (the others fix shapes or the
+program's structure); asking for another one is refused with a :class:`ConfigError`
+that lists the sweepable ones.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any
+
+import jax
+
+from smjax.train.config import ConfigError, TrainConfig
+
+PREFIX = "agent."
+
+
+def sweepable_names(agent) -> list[str]:
+    return [PREFIX + name for name in agent.sweepable]
+
+
+def _number(key: str, value: Any) -> float:
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise ConfigError(f"sweep {key}: {value!r} is not a number") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"sweep {key}: {value!r} is not a finite number")
+    return float(value)
+
+
+def _check_value(cfg: TrainConfig, name: str, value: float) -> None:
+    """The value must be valid for the learner's config (its own range check)."""
+    from smjax.agents import make_config
+
+    try:
+        make_config(cfg.algo, **(cfg.agent | {name: value}))
+    except ValueError as err:
+        raise ConfigError(f"sweep {PREFIX}{name}: {err}") from None
+
+
+def sweep_points(cfg: TrainConfig, agent, sweep: dict) -> list[dict]:
+    """The points (``{"agent.field": value}`` each) of ``sweep``, validated, in the order
+    of ``itertools.product`` over the given lists."""
+    if not isinstance(sweep, dict) or not sweep:
+        raise ConfigError("a sweep needs at least one field, e.g. {'agent.learning_rate': [1e-4, 3e-4]}")
+    allowed = sweepable_names(agent)
+    lists = {}
+    for key, values in sweep.items():
+        if key not in allowed:
+            raise ConfigError(f"{key!r} cannot be swept with algo {cfg.algo!r}; sweepable: "
+                              f"{', '.join(allowed) or 'none'}")
+        values = list(values) if isinstance(values, (list, tuple)) else [values]
+        if not values:
+            raise ConfigError(f"sweep {key}: needs at least one value")
+        lists[key] = [_number(key, v) for v in values]
+        for v in lists[key]:
+            _check_value(cfg, key[len(PREFIX):], v)
+    return [dict(zip(lists, combo)) for combo in itertools.product(*lists.values())]
+
+
+def slot_layout(points: list[dict], seeds: list[int]) -> tuple[list[int], dict]:
+    """Per slot, its seed and (per swept field) its value; point-major."""
+    slot_seeds = [s for _ in points for s in seeds]
+    hp = {key[len(PREFIX):]: [p[key] for p in points for _ in seeds] for key in points[0]}
+    return slot_seeds, hp
+
+
+def point_config(cfg: TrainConfig, point: dict) -> TrainConfig:
+    """The config that, run alone, is this point."""
+    return cfg.replace(agent=cfg.agent | {k[len(PREFIX):]: v for k, v in point.items()})
+
+
+def _slice_lists(record: Any, lo: int, hi: int, num_slots: int) -> Any:
+    """Per-slot lists (length ``num_slots``) of a host record, cut to ``[lo, hi)``."""
+    if isinstance(record, dict):
+        return {k: _slice_lists(v, lo, hi, num_slots) for k, v in record.items()}
+    if isinstance(record, list) and len(record) == num_slots:
+        return record[lo:hi]
+    return record
+
+
+def point_raw(raw: dict, p: int, num_seeds: int, num_slots: int) -> dict:
+    """The trainer's raw results of point ``p`` alone (what its run alone returns)."""
+    lo, hi = p * num_seeds, (p + 1) * num_seeds
+    out = dict(raw)
+    out["levels"] = [_slice_lists(rec, lo, hi, num_slots) for rec in raw["levels"]]
+    out["finetune"] = (None if raw.get("finetune") is None
+                       else _slice_lists(raw["finetune"], lo, hi, num_slots))
+    rows = [(row, slot) for row, slot in zip(raw["curves"], raw["curve_slots"]) if lo <= slot < hi]
+    out["curves"] = [row for row, _ in rows]
+    out["curve_slots"] = [slot - lo for _, slot in rows]
+    cut = lambda x: x[lo:hi]  # noqa: E731
+    out["final"] = jax.tree.map(cut, raw["final"])
+    out["final_by_policy"] = jax.tree.map(cut, raw["final_by_policy"])
+    out["bank"] = jax.tree.map(cut, raw["bank"])
+    out["learned"] = raw["learned"][lo:hi]
+    return out
