@@ -72,7 +72,7 @@ def test_a_sweep_compiles_once_and_each_point_equals_its_run_alone(tmp_path, low
     ({"agent.hidden_sizes": [8]}, "sweepable: agent.learning_rate"),
     ({"gamma": [0.9, 0.99]}, "cannot be swept"),
     ({"agent.nope": [1.0]}, "cannot be swept"),
-    ({"agent.learning_rate": ["fast"]}, "not a number"),
+    ({"agent.learning_rate": ["fast"]}, "must be a finite number"),
     ({"agent.learning_rate": [2.0]}, "learning_rate"),
     ({"agent.learning_rate": []}, "at least one value"),
 ])
@@ -108,3 +108,27 @@ def test_a_sweep_resumes_exactly_from_its_checkpoint(tmp_path, monkeypatch):
     resumed = run(make_keydoor(), cfg, [0, 1], out, progress=False, resume=True, sweep=SWEEP)
     for a, b in zip(resumed["points"], straight["points"]):
         assert _numbers(a["results"]) == _numbers(b["results"])
+
+
+@pytest.mark.parametrize("flag, message", [
+    ("agent.hidden_sizes=8,16", "'agent.hidden_sizes' cannot be swept with algo 'ppo'; sweepable: "
+                                "agent.learning_rate, agent.gae_lambda"),
+    ("agent.learning_rate=1e-4,fast", "sweep agent.learning_rate must be a finite number"),
+    ("agent.learning_rate=1e-4,3", "learning_rate must lie in (0.0, 1.0]"),
+    ("agent.learning_rate", "--sweep must look like FIELD=V1,V2"),
+])
+def test_the_cli_refuses_bad_sweeps_in_one_line(flag, message, capsys, tmp_path):
+    from smjax.cli import main
+
+    argv = ["train", "craft/get_wood", "--quiet", "--sweep", flag, "--out", str(tmp_path / "r")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_help_explains_sweep(capsys):
+    from smjax.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    assert "--sweep agent.learning_rate=1e-4,3e-4" in " ".join(capsys.readouterr().out.split())

@@ -17,7 +17,7 @@ from smjax.train.loop import HierarchyTrainer, NonFiniteError, plan_levels, reso
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.results import build_results, write_results, write_sweep
-from smjax.train.sweep import point_config, point_raw, slot_layout, sweep_points
+from smjax.train.sweep import normalize_sweep, point_config, point_raw, slot_layout, sweep_points
 
 
 def validate_seeds(seeds) -> list[int]:
@@ -110,32 +110,32 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
                   file=sys.stderr)
     cfg = cfg.replace(agent=normalize_agent(cfg.algo, cfg.agent))
     env_overrides = dict(env_overrides or {})
-    points = None
     if sweep is not None:  # refused before anything is locked or compiled
         if dist.is_multiprocess():
             raise ConfigError("a sweep runs in one process for now; drop --sweep or run it "
                               "on one process")
-        points = sweep_points(cfg, make_agent(cfg.algo, **cfg.agent), sweep)
+        sweep = normalize_sweep(cfg, make_agent(cfg.algo, **cfg.agent), sweep)
     if resume and out_dir is None:
         raise ValueError("resume needs the run's output directory")
     lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
     try:
-        return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume, points)
+        return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume, sweep)
     finally:
         if lock is not None:
             lock.release()
 
 
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides: dict,
-                progress: bool, resume: bool, points: list | None) -> dict:
+                progress: bool, resume: bool, sweep: dict | None) -> dict:
     agent = make_agent(cfg.algo, **cfg.agent)
+    points = sweep_points(sweep) if sweep is not None else None
     if isinstance(task, str):
         env, env_params = make(task, **env_overrides)
     else:
         env, env_params = task
     identity = run_identity(env.name, cfg, seeds, env_overrides)
-    if points is not None:  # a checkpoint of a sweep resumes only that sweep
-        identity["sweep"] = points
+    if sweep is not None:  # a checkpoint of a sweep resumes only that sweep
+        identity["sweep"] = sweep
     # with several processes process 0's view of out_dir decides, so all raise alike
     existing = ckpt.shared_meta(out_dir) if out_dir is not None else None
     if resume:

@@ -15,11 +15,11 @@ that lists the sweepable ones.
 from __future__ import annotations
 
 import itertools
-import math
 from typing import Any
 
 import jax
 
+from smjax.core.overrides import parse_float
 from smjax.train.config import ConfigError, TrainConfig
 
 PREFIX = "agent."
@@ -30,14 +30,10 @@ def sweepable_names(agent) -> list[str]:
 
 
 def _number(key: str, value: Any) -> float:
-    if isinstance(value, str):
-        try:
-            value = float(value)
-        except ValueError:
-            raise ConfigError(f"sweep {key}: {value!r} is not a number") from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"sweep {key}: {value!r} is not a finite number")
-    return float(value)
+    try:
+        return parse_float(f"sweep {key}", value)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
 
 
 def _check_value(cfg: TrainConfig, name: str, value: float) -> None:
@@ -50,9 +46,8 @@ def _check_value(cfg: TrainConfig, name: str, value: float) -> None:
         raise ConfigError(f"sweep {PREFIX}{name}: {err}") from None
 
 
-def sweep_points(cfg: TrainConfig, agent, sweep: dict) -> list[dict]:
-    """The points (``{"agent.field": value}`` each) of ``sweep``, validated, in the order
-    of ``itertools.product`` over the given lists."""
+def normalize_sweep(cfg: TrainConfig, agent, sweep: dict) -> dict[str, list[float]]:
+    """``sweep`` checked, as ``{"agent.field": [floats]}`` (what a checkpoint records)."""
     if not isinstance(sweep, dict) or not sweep:
         raise ConfigError("a sweep needs at least one field, e.g. {'agent.learning_rate': [1e-4, 3e-4]}")
     allowed = sweepable_names(agent)
@@ -67,7 +62,27 @@ def sweep_points(cfg: TrainConfig, agent, sweep: dict) -> list[dict]:
         lists[key] = [_number(key, v) for v in values]
         for v in lists[key]:
             _check_value(cfg, key[len(PREFIX):], v)
+    return lists
+
+
+def sweep_points(lists: dict[str, list[float]]) -> list[dict]:
+    """The points (``{"agent.field": value}`` each) of a normalized sweep, in the order of
+    ``itertools.product`` over its lists."""
     return [dict(zip(lists, combo)) for combo in itertools.product(*lists.values())]
+
+
+def parse_sweep_flags(items: list[str]) -> dict[str, list[str]]:
+    """``--sweep FIELD=V1,V2`` flags as ``{FIELD: [V1, V2]}`` (values checked by ``run``)."""
+    out: dict[str, list[str]] = {}
+    for item in items:
+        key, sep, values = item.partition("=")
+        if not sep or not key.strip() or not values.strip():
+            raise ConfigError(f"--sweep must look like FIELD=V1,V2,... (e.g. "
+                              f"agent.learning_rate=1e-4,3e-4), got {item!r}")
+        if key.strip() in out:
+            raise ConfigError(f"--sweep {key.strip()} is given twice; list its values once")
+        out[key.strip()] = [v.strip() for v in values.split(",")]
+    return out
 
 
 def slot_layout(points: list[dict], seeds: list[int]) -> tuple[list[int], dict]:
