@@ -34,6 +34,10 @@ from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
 
 
+# 2: learner states carry their sweepable hyper-parameters (state.hp)
+CHECKPOINT_FORMAT = 2
+
+
 class NonFiniteError(FloatingPointError):
     """A learner produced non-finite parameters (``run`` says which checkpoint is kept)."""
 
@@ -174,7 +178,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         """Checkpoint (collective with several processes: all gather, process 0 writes)."""
         if self.out_dir is None:
             return
-        meta = {"host": self.host, "run": self.run_meta}
+        meta = {"host": self.host, "run": self.run_meta, "format": CHECKPOINT_FORMAT}
         arrays = dist.gather(self.arrays) if dist.is_multiprocess() else self.arrays
         if self.writer:
             ckpt.save_checkpoint(self.out_dir, self.host["chunks"], arrays, meta)
@@ -185,10 +189,11 @@ class HierarchyTrainer(ft.FinetunePhase):
         info = ckpt.shared_meta(self.out_dir) if self.out_dir is not None else None
         if info is None:
             return False
-        if "finetune" not in info["meta"]["host"]:
+        if "finetune" not in info["meta"]["host"] or info["meta"].get("format", 1) < CHECKPOINT_FORMAT:
             raise ckpt.CheckpointError(
                 f"the checkpoint in {ckpt.checkpoint_dir(self.out_dir)} was written by an older "
-                f"smjax (before the fine-tuning phase); it cannot be resumed by this one")
+                f"smjax (before learner states carried their hyper-parameters); it cannot be "
+                f"resumed by this one")
         if dist.is_multiprocess():
             like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), self.arrays)
             loaded = ckpt.load_arrays(self.out_dir, like) if self.writer else like
