@@ -132,3 +132,16 @@ def test_help_explains_sweep(capsys):
     with pytest.raises(SystemExit):
         main(["train", "--help"])
     assert "--sweep agent.learning_rate=1e-4,3e-4" in " ".join(capsys.readouterr().out.split())
+
+
+def test_a_sweeps_files_count_as_a_run_and_overwrite_removes_them(tmp_path):
+    from smjax.train.outdir import OutDirError, prepare_out_dir
+
+    (tmp_path / "point-0").mkdir()
+    (tmp_path / "point-0" / "results.json").write_text("{}")
+    (tmp_path / "sweep.json").write_text("{}")
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(OutDirError, match="point-0"):
+        prepare_out_dir(tmp_path, resume=False, overwrite=False)
+    prepare_out_dir(tmp_path, resume=False, overwrite=True).release()
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["notes.txt"]
