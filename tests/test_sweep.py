@@ -69,8 +69,9 @@ def test_a_sweep_compiles_once_and_each_point_equals_its_run_alone(tmp_path, low
 
 
 @pytest.mark.parametrize("sweep, needle", [
-    ({"agent.hidden_sizes": [8]}, "sweepable: agent.learning_rate"),
-    ({"gamma": [0.9, 0.99]}, "cannot be swept"),
+    ({"agent.hidden_sizes": [8]}, "sweepable: gamma, agent.learning_rate"),
+    ({"num_envs": [8, 16]}, "cannot be swept"),
+    ({"gamma": [0.9, 1.5]}, "'gamma' = 1.5: must be in"),
     ({"agent.nope": [1.0]}, "cannot be swept"),
     ({"agent.learning_rate": ["fast"]}, "must be a finite number"),
     ({"agent.learning_rate": [2.0]}, "learning_rate"),
@@ -80,6 +81,18 @@ def test_bad_sweeps_are_refused_before_training(tmp_path, sweep, needle, lowered
     with pytest.raises(ConfigError, match=needle):
         run(make_keydoor(), TrainConfig(**CFG), [0], tmp_path / "bad", progress=False, sweep=sweep)
     assert lowered == [] and not (tmp_path / "bad" / "checkpoints").exists()
+
+
+def test_a_gamma_sweep_point_equals_its_run_alone(tmp_path, lowered):
+    cfg = TrainConfig(**(CFG | {"algo": "actor-critic"}))
+    swept = run(make_keydoor(), cfg, [2], progress=False,
+                sweep={"gamma": [0.9, 0.99], "agent.ent_coef": [0.01]})
+    assert lowered == [2]
+    alone = run(make_keydoor(), cfg.replace(gamma=0.9, agent={"ent_coef": 0.01}), [2],
+                progress=False)
+    assert swept["points"][0]["overrides"] == {"gamma": 0.9, "agent.ent_coef": 0.01}
+    assert _numbers(swept["points"][0]["results"]) == _numbers(alone)
+    assert _numbers(swept["points"][1]["results"]) != _numbers(alone)
 
 
 class _MachineLost(Exception):
@@ -112,7 +125,7 @@ def test_a_sweep_resumes_exactly_from_its_checkpoint(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("flag, message", [
     ("agent.hidden_sizes=8,16", "'agent.hidden_sizes' cannot be swept with algo 'ppo'; sweepable: "
-                                "agent.learning_rate, agent.gae_lambda"),
+                                "gamma, agent.learning_rate, agent.gae_lambda"),
     ("agent.learning_rate=1e-4,fast", "sweep agent.learning_rate must be a finite number"),
     ("agent.learning_rate=1e-4,3", "learning_rate must lie in (0.0, 1.0]"),
     ("agent.learning_rate", "--sweep must look like FIELD=V1,V2"),

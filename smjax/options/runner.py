@@ -123,6 +123,8 @@ class Controls:
       as the runner was built); its next episode starts where the levels above call it again.
     temperature: float, how frozen policies pick: 0 greedy (argmax), else a sample at this
       temperature (None: as the runner was built).
+    gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs
+      with different discounts share one compile (a sweep).
     """
 
     learner: jax.Array
@@ -131,6 +133,7 @@ class Controls:
     teleport: jax.Array | None = None
     continue_episodes: jax.Array | None = None
     temperature: jax.Array | None = None
+    gamma: jax.Array | None = None
 
 
 class HierarchyRunner:
@@ -348,7 +351,8 @@ class HierarchyRunner:
             (learner_on & sat[:, learner_idx]).astype(jnp.float32),
         )
         tp_steps = jnp.where(teleported >= 0, self.nominal[jnp.maximum(teleported, 0)], 1.0)
-        discount = self.gamma ** tp_steps
+        gamma = self.gamma if controls.gamma is None else controls.gamma
+        discount = gamma ** tp_steps
         # In evaluation (no learner) the whole episode counts, with the environment's reward.
         started = carry.learner_started | decided | (controls.learner < 0)
         ep_return = carry.learner_return + jnp.where(started, learner_reward, 0.0)

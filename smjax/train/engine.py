@@ -122,11 +122,12 @@ class Engine:
 
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
     def _chunk(self, state: SeedState, active, bank, learned, learner, start, teleport,
-               continue_episodes):
+               continue_episodes, gamma):
         """``teleport``/``continue_episodes``: the levels' setting (teleports on, episodes
         reset with the learner's option unless ``TrainConfig.continue_episodes``) or
-        fine-tuning's (the learned hierarchy alone, whole task episodes)."""
-        controls = Controls(learner, start, learned, teleport, continue_episodes)
+        fine-tuning's (the learned hierarchy alone, whole task episodes). ``gamma``: the
+        seed's discount (traced: a sweep over it compiles once)."""
+        controls = Controls(learner, start, learned, teleport, continue_episodes, gamma=gamma)
         runner, agent, cfg = self.runner, self.agent, self.cfg
 
         def update_step(st: SeedState, _):

@@ -109,10 +109,12 @@ class HierarchyTrainer(ft.FinetunePhase):
 
     def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
                  out_dir=None, progress: bool = True, run_meta: dict | None = None,
-                 hp: dict | None = None):
+                 hp: dict | None = None, gamma: list[float] | None = None):
         """``seeds``: one per slot (a sweep repeats them, once per point); ``hp``: per slot,
-        the learner's sweepable hyper-parameters that differ from its config (a sweep)."""
+        the learner's sweepable hyper-parameters that differ from its config, ``gamma``:
+        per slot, the discount (a sweep; default ``cfg.gamma``)."""
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
+        self.gamma = list(gamma) if gamma is not None else [engine.cfg.gamma] * len(self.seeds)
         self.slot_hp = {k: jnp.asarray(v, jnp.float32) for k, v in (hp or {}).items()}
         self.cfg = engine.cfg
         self.cfg.check_level_names([p.name for p in plans])
@@ -272,8 +274,9 @@ class HierarchyTrainer(ft.FinetunePhase):
         tuning = [self._finetuning(s) for s in range(S)]
         teleport = self._per_seed([not t for t in tuning], bool)
         keep = self._per_seed([t or self.cfg.continue_episodes for t in tuning], bool)
+        gamma = self._per_seed(self.gamma, jnp.float32)
         args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
-                learner, start, teleport, keep)
+                learner, start, teleport, keep, gamma)
         if self._compiled is None:  # one compile serves every level (ids are traced)
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()

@@ -149,11 +149,12 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     hierarchy_name, hierarchy = resolve_hierarchy(env, cfg)
     plans = plan_levels(hierarchy, cfg.method)
     cfg.check_level_names([p.name for p in plans])
-    slot_seeds, hp = slot_layout(points, seeds) if points is not None else (seeds, None)
+    slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
+                             else (seeds, None, None))
     check_fits(env, env_params, cfg, len(slot_seeds))
     engine = Engine(env, env_params, hierarchy, agent, cfg)
     trainer = HierarchyTrainer(engine, plans, slot_seeds, out_dir=out_dir, progress=progress,
-                               run_meta=identity, hp=hp)
+                               run_meta=identity, hp=hp, gamma=gamma)
     if resume:
         trainer.restore()
     try:

@@ -23,10 +23,12 @@ from smjax.core.overrides import parse_float
 from smjax.train.config import ConfigError, TrainConfig
 
 PREFIX = "agent."
+# TrainConfig fields that are traced per slot (the engine's chunk takes them per seed)
+TRAIN_SWEEPABLE = ("gamma",)
 
 
 def sweepable_names(agent) -> list[str]:
-    return [PREFIX + name for name in agent.sweepable]
+    return list(TRAIN_SWEEPABLE) + [PREFIX + name for name in agent.sweepable]
 
 
 def _number(key: str, value: Any) -> float:
@@ -36,14 +38,17 @@ def _number(key: str, value: Any) -> float:
         raise ConfigError(str(err)) from None
 
 
-def _check_value(cfg: TrainConfig, name: str, value: float) -> None:
-    """The value must be valid for the learner's config (its own range check)."""
+def _check_value(cfg: TrainConfig, key: str, value: float) -> None:
+    """The value must be valid for its config (the config's own range check)."""
     from smjax.agents import make_config
 
     try:
-        make_config(cfg.algo, **(cfg.agent | {name: value}))
+        if key.startswith(PREFIX):
+            make_config(cfg.algo, **(cfg.agent | {key[len(PREFIX):]: value}))
+        else:
+            cfg.replace(**{key: value})
     except ValueError as err:
-        raise ConfigError(f"sweep {PREFIX}{name}: {err}") from None
+        raise ConfigError(f"sweep {key}: {err}") from None
 
 
 def normalize_sweep(cfg: TrainConfig, agent, sweep: dict) -> dict[str, list[float]]:
@@ -61,7 +66,7 @@ def normalize_sweep(cfg: TrainConfig, agent, sweep: dict) -> dict[str, list[floa
             raise ConfigError(f"sweep {key}: needs at least one value")
         lists[key] = [_number(key, v) for v in values]
         for v in lists[key]:
-            _check_value(cfg, key[len(PREFIX):], v)
+            _check_value(cfg, key, v)
     return lists
 
 
@@ -85,16 +90,21 @@ def parse_sweep_flags(items: list[str]) -> dict[str, list[str]]:
     return out
 
 
-def slot_layout(points: list[dict], seeds: list[int]) -> tuple[list[int], dict]:
-    """Per slot, its seed and (per swept field) its value; point-major."""
+def slot_layout(cfg: TrainConfig, points: list[dict], seeds: list[int]) -> tuple:
+    """Per slot (point-major): its seed, its learner's swept values (per field) and its
+    discount."""
     slot_seeds = [s for _ in points for s in seeds]
-    hp = {key[len(PREFIX):]: [p[key] for p in points for _ in seeds] for key in points[0]}
-    return slot_seeds, hp
+    hp = {key[len(PREFIX):]: [p[key] for p in points for _ in seeds]
+          for key in points[0] if key.startswith(PREFIX)}
+    gamma = [point_config(cfg, p).gamma for p in points for _ in seeds]
+    return slot_seeds, hp, gamma
 
 
 def point_config(cfg: TrainConfig, point: dict) -> TrainConfig:
     """The config that, run alone, is this point."""
-    return cfg.replace(agent=cfg.agent | {k[len(PREFIX):]: v for k, v in point.items()})
+    agent = {k[len(PREFIX):]: v for k, v in point.items() if k.startswith(PREFIX)}
+    train = {k: v for k, v in point.items() if not k.startswith(PREFIX)}
+    return cfg.replace(agent=cfg.agent | agent, **train)
 
 
 def _slice_lists(record: Any, lo: int, hi: int, num_slots: int) -> Any:
