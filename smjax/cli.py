@@ -58,6 +58,14 @@ def _add_train(sub):
     p.add_argument("--set", action="append", metavar="FIELD=VALUE", help="override a TrainConfig field")
     p.add_argument("--agent", action="append", metavar="KEY=VALUE", help="learner hyper-parameter")
     p.add_argument("--env", action="append", metavar="KEY=VALUE", help="environment override")
+    p.add_argument("--sweep", action="append", metavar="FIELD=V1,V2",
+                   help="hyper-parameter sweep, e.g. --sweep agent.learning_rate=1e-4,3e-4 "
+                        "[--sweep agent.ent_coef=0,0.01]: every point of the lists' product "
+                        "trains for every seed in the same one compiled program; writes "
+                        "OUT/sweep.json and OUT/point-<k>/results.json (a point's results are "
+                        "those of its run alone). Sweepable: gamma; agent.learning_rate (every "
+                        "algo); ppo: agent.gae_lambda, clip_eps, ent_coef, vf_coef; "
+                        "actor-critic: agent.ent_coef, vf_coef")
     p.add_argument("--hierarchy", default=None, help="hierarchy name (see `smjax list --hierarchies`)")
     p.add_argument("--num-envs", type=int, default=None, help="parallel environments per seed")
     p.add_argument("--threshold", type=float, default=None,

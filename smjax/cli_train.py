@@ -192,15 +192,41 @@ def cmd_train(args) -> int:
     if args.fixed_map:
         env_over["fixed_map"] = True
     seeds = choose_seeds(args, saved)
+    sweep = choose_sweep(args, saved)
     out = args.resume or args.out or f"runs/{args.task.replace('/', '_')}_{cfg.method}"
-    args._batch = f"{len(seeds)} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
+    slots = len(seeds) * _num_points(sweep)
+    args._batch = f"{slots} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
     results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
-                  resume=bool(args.resume), overwrite=args.overwrite)
+                  resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep)
     if not is_writer():  # process 0 reports for the whole run
         return 0
-    summary = {k: results[k] for k in ("env", "task", "method", "algo", "episodes_to_threshold",
-                                       "final_success", "wall_seconds", "compile_seconds")}
-    print(json.dumps(summary))
-    print(f"wrote {Path(out) / 'results.json'}, curves.csv, curves.png")
+    if sweep is None:
+        print(json.dumps(_summary(results)))
+        print(f"wrote {Path(out) / 'results.json'}, curves.csv, curves.png")
+    else:
+        for k, point in enumerate(results["points"]):
+            print(json.dumps({"point": k, "overrides": point["overrides"]} | _summary(point["results"])))
+        print(f"wrote {Path(out) / 'sweep.json'}, point-<k>/results.json, curves.csv, curves.png")
     sys.stdout.flush()
     return 0
+
+
+def _summary(results: dict) -> dict:
+    return {k: results[k] for k in ("env", "task", "method", "algo", "episodes_to_threshold",
+                                    "final_success", "wall_seconds", "compile_seconds")}
+
+
+def choose_sweep(args, saved: dict | None) -> dict | None:
+    """``--sweep`` flags, else (resuming) the checkpointed run's sweep, else None."""
+    from smjax.train.sweep import parse_sweep_flags
+
+    if args.sweep:
+        return parse_sweep_flags(args.sweep)
+    return saved.get("sweep") if saved else None
+
+
+def _num_points(sweep: dict | None) -> int:
+    count = 1
+    for values in (sweep or {}).values():
+        count *= max(1, len(values))
+    return count

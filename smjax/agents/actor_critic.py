@@ -26,7 +26,7 @@ import numpy as np
 import optax
 
 from smjax.agents import config as checks
-from smjax.agents.base import ActOutput, Agent, Transition
+from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
 from smjax.agents.networks import flatten_obs, masked_entropy, masked_log_softmax, masked_mean, take_action
 from smjax.agents.ppo import (
     PolicyGradientState,
@@ -65,6 +65,10 @@ class ActorCriticConfig:
         checks.check_range(self, "max_grad_norm", 0.0)
 
 
+# the config fields the actor-critic reads from ``state.hp`` (traced: a sweep compiles once)
+SWEEPABLE = ("learning_rate", "vf_coef", "ent_coef")
+
+
 def exploration_epsilon(config: ActorCriticConfig, episodes_seen: jax.Array) -> jax.Array:
     decayed = jnp.exp(-config.epsilon_decay * episodes_seen.astype(jnp.float32))
     return jnp.maximum(decayed, config.epsilon_min)
@@ -72,7 +76,7 @@ def exploration_epsilon(config: ActorCriticConfig, episodes_seen: jax.Array) -> 
 
 def make_agent(config: ActorCriticConfig | None = None) -> Agent:
     config = ActorCriticConfig() if config is None else config
-    adam = optax.adam(config.learning_rate)
+    adam = optax.scale_by_adam()  # the learning rate comes from state.hp (scale_by_lr)
     optimizer = (
         optax.chain(optax.clip_by_global_norm(config.max_grad_norm), adam)
         if config.max_grad_norm > 0
@@ -83,7 +87,8 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
         return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso)
 
     def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
-        return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions)
+        return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions,
+                                          hyper_params(config, SWEEPABLE))
 
     def act(state: PolicyGradientState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
         epsilon = exploration_epsilon(config, state.episodes_seen)
@@ -92,7 +97,7 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
     def policy_logits(params, obs: jax.Array) -> jax.Array:
         return logits_of(network_for, params, obs)
 
-    def loss_fn(params, obs, action, mask, returns, weight):
+    def loss_fn(params, obs, action, mask, returns, weight, hp):
         logits, value = network_for(mask.shape[-1]).apply(params, obs)
         log_prob = take_action(masked_log_softmax(logits, mask), action)
         advantage = jax.lax.stop_gradient(returns - value)
@@ -103,7 +108,7 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
         policy_loss = masked_mean(-log_prob * advantage, weight)
         value_loss = 0.5 * masked_mean(jnp.square(value - returns), weight)
         entropy = masked_mean(masked_entropy(logits, mask), weight)
-        total = policy_loss + config.vf_coef * value_loss - config.ent_coef * entropy
+        total = policy_loss + hp["vf_coef"] * value_loss - hp["ent_coef"] * entropy
         return total, {"policy_loss": policy_loss, "value_loss": value_loss, "entropy": entropy}
 
     def update(state: PolicyGradientState, traj: Transition, key: jax.Array):
@@ -122,8 +127,9 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
         mask = traj.action_mask.reshape(num_items, -1).astype(bool)
         weight = decision.reshape(num_items)
         (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(
-            state.params, obs, action, mask, returns.reshape(num_items), weight)
+            state.params, obs, action, mask, returns.reshape(num_items), weight, state.hp)
         updates, new_opt_state = optimizer.update(grads, state.opt_state, state.params)
+        updates = scale_by_lr(updates, state.hp["learning_rate"])
         new_params = optax.apply_updates(state.params, updates)
         # With no decision in the rollout there is nothing to learn; do not let Adam's
         # moments drift on a zero gradient.
@@ -139,6 +145,7 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
             updates=state.updates + 1,
             episodes_seen=state.episodes_seen + episodes,
             decisions_seen=state.decisions_seen + num_decisions,
+            hp=state.hp,
         )
         metrics = dict(aux, total_loss=total, decisions=num_decisions,
                        mean_return=masked_mean(returns, decision),
@@ -152,4 +159,5 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
         seen = jnp.asarray(np.iinfo(np.int32).max // 2, jnp.int32)
         return state.replace(params=params, episodes_seen=seen)
 
-    return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start)
+    return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start,
+                 SWEEPABLE)

@@ -26,12 +26,17 @@ An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over
   a distribution)
 * ``warm_start(state, params) -> state``: a fresh state that continues from trained
   ``params`` (fine-tuning); exploration schedules start where they ended
+* ``sweepable``: the config fields that may differ between the slots of one compiled
+  program (a hyper-parameter sweep). Their values live in the learner state
+  (``state.hp``, float32 scalars, one per slot under ``vmap``) rather than being closed
+  over, so a sweep compiles once; every other field fixes shapes or program structure
 """
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
 
 import jax
+import jax.numpy as jnp
 
 from smjax.core.transition import ActOutput, Transition  # noqa: F401  (re-exported)
 
@@ -44,3 +49,16 @@ class Agent(NamedTuple):
     policy_logits: Callable[[Any, jax.Array], jax.Array]
     frozen_policy: str = "sample"
     warm_start: Callable[[Any, Any], Any] = lambda state, params: state.replace(params=params)
+    sweepable: tuple[str, ...] = ()
+
+
+def hyper_params(config: Any, names: tuple[str, ...]) -> dict[str, jax.Array]:
+    """The traced hyper-parameters a learner state carries (``state.hp``)."""
+    return {name: jnp.asarray(getattr(config, name), jnp.float32) for name in names}
+
+
+def scale_by_lr(updates: Any, learning_rate: jax.Array) -> Any:
+    """The last step of ``optax.adam`` with a traced learning rate (the same arithmetic
+    as ``optax.scale_by_learning_rate``: updates times ``-learning_rate``)."""
+    step = -learning_rate
+    return jax.tree.map(lambda g: step * g, updates)

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import optax
 
 from smjax.agents import config as checks
-from smjax.agents.base import ActOutput, Agent, Transition
+from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
 from smjax.agents.networks import (
     QNetwork,
     epsilon_greedy_log_probs,
@@ -100,6 +100,11 @@ class DQNState:
     updates: jax.Array
     episodes_seen: jax.Array
     decisions_seen: jax.Array
+    hp: Any = flax.struct.field(default_factory=dict)  # sweepable hyper-parameters (base.py)
+
+
+# the config fields DQN reads from ``state.hp`` (traced: a sweep compiles once)
+SWEEPABLE = ("learning_rate",)
 
 
 def linear_epsilon(config: DQNConfig, grad_steps: jax.Array, decisions_seen: jax.Array) -> jax.Array:
@@ -145,7 +150,7 @@ def smdp_td_targets(q_next_online, q_next_target, reward, discount, terminal, ne
 def make_agent(config: DQNConfig | None = None) -> Agent:
     config = DQNConfig() if config is None else config
     optimizer = optax.chain(
-        optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
+        optax.clip_by_global_norm(config.max_grad_norm), optax.scale_by_adam()  # lr: state.hp
     )
 
     def network_for(num_actions: int) -> QNetwork:
@@ -168,7 +173,8 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
             size=jnp.zeros((), jnp.int32), insert_pos=jnp.zeros((), jnp.int32),
         )
         zero = jnp.zeros((), jnp.int32)
-        return DQNState(params, params, optimizer.init(params), buffer, zero, zero, zero, zero)
+        return DQNState(params, params, optimizer.init(params), buffer, zero, zero, zero, zero,
+                        hyper_params(config, SWEEPABLE))
 
     def act(state: DQNState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
         q = q_values(state.params, obs)
@@ -201,6 +207,7 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
         (loss, (mean_q, td_abs)), grads = jax.value_and_grad(loss_fn, has_aux=True)(
             state.params, state.target_params, batch)
         updates, opt_state = optimizer.update(grads, state.opt_state, state.params)
+        updates = scale_by_lr(updates, state.hp["learning_rate"])
         params = optax.apply_updates(state.params, updates)
         grad_steps = state.grad_steps + 1
         sync = grad_steps % config.target_update_period == 0
@@ -261,4 +268,4 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
         return state.replace(params=params, target_params=params, decisions_seen=seen,
                              grad_steps=jnp.maximum(state.grad_steps, seen))
 
-    return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start)
+    return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start, SWEEPABLE)

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import optax
 
 from smjax.agents import config as checks
-from smjax.agents.base import ActOutput, Agent, Transition
+from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
 from smjax.agents.networks import (
     ActorCritic,
     epsilon_mixture_log_probs,
@@ -82,18 +82,23 @@ class PolicyGradientState:
     updates: jax.Array
     episodes_seen: jax.Array
     decisions_seen: jax.Array
+    hp: Any = flax.struct.field(default_factory=dict)  # sweepable hyper-parameters (base.py)
+
+
+# the config fields PPO reads from ``state.hp`` (traced: one compile serves a sweep)
+SWEEPABLE = ("learning_rate", "gae_lambda", "clip_eps", "ent_coef", "vf_coef")
 
 
 def make_network(num_actions: int, hidden_sizes, activation: str, shared_torso: bool):
     return ActorCritic(num_actions, tuple(hidden_sizes), activation, shared_torso)
 
 
-def init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions):
+def init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions, hp):
     """Shared ``init`` of the actor-critic-network learners."""
     network = network_for(checks.check_num_actions(num_actions))
     params = network.init(key, flatten_obs(jnp.asarray(example_obs)[None]))
     zero = jnp.zeros((), jnp.int32)
-    return PolicyGradientState(params, optimizer.init(params), zero, zero, zero, zero)
+    return PolicyGradientState(params, optimizer.init(params), zero, zero, zero, zero, hp)
 
 
 def num_actions_of(params) -> int:
@@ -143,16 +148,18 @@ def apply_if(pred: jax.Array, new: Any, old: Any) -> Any:
 
 def make_agent(config: PPOConfig | None = None) -> Agent:
     config = PPOConfig() if config is None else config
+    # optax.adam without its learning rate, which is applied from state.hp (scale_by_lr)
     optimizer = optax.chain(
         optax.clip_by_global_norm(config.max_grad_norm),
-        optax.adam(config.learning_rate, eps=config.adam_eps),
+        optax.scale_by_adam(eps=config.adam_eps),
     )
 
     def network_for(num_actions: int) -> ActorCritic:
         return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso)
 
     def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
-        return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions)
+        return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions,
+                                          hyper_params(config, SWEEPABLE))
 
     def act(state: PolicyGradientState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
         return sample_actions(network_for, state.params, obs, mask, key)
@@ -160,28 +167,29 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
     def policy_logits(params, obs: jax.Array) -> jax.Array:
         return logits_of(network_for, params, obs)
 
-    def loss_fn(params, batch):
+    def loss_fn(params, batch, hp):
         obs, action, mask, old_log_prob, old_value, adv, ret, weight = batch
         logits, value = network_for(mask.shape[-1]).apply(params, obs)
         log_prob = take_action(masked_log_softmax(logits, mask), action)
         log_ratio = log_prob - old_log_prob
         ratio = jnp.exp(log_ratio)
-        clipped = jnp.clip(ratio, 1.0 - config.clip_eps, 1.0 + config.clip_eps)
+        clip_eps = hp["clip_eps"]
+        clipped = jnp.clip(ratio, 1.0 - clip_eps, 1.0 + clip_eps)
         policy_loss = masked_mean(-jnp.minimum(ratio * adv, clipped * adv), weight)
         value_err = jnp.square(value - ret)
         if config.clip_value_loss:
-            value_clipped = old_value + jnp.clip(value - old_value, -config.clip_eps, config.clip_eps)
+            value_clipped = old_value + jnp.clip(value - old_value, -clip_eps, clip_eps)
             value_err = jnp.maximum(value_err, jnp.square(value_clipped - ret))
         value_loss = 0.5 * masked_mean(value_err, weight)
         entropy = masked_mean(masked_entropy(logits, mask), weight)
-        total = policy_loss + config.vf_coef * value_loss - config.ent_coef * entropy
+        total = policy_loss + hp["vf_coef"] * value_loss - hp["ent_coef"] * entropy
         aux = {
             "policy_loss": policy_loss,
             "value_loss": value_loss,
             "entropy": entropy,
             # (r - 1) - log r: a low-variance, non-negative estimate of KL(old || new).
             "approx_kl": masked_mean((ratio - 1.0) - log_ratio, weight),
-            "clip_fraction": masked_mean((jnp.abs(ratio - 1.0) > config.clip_eps).astype(jnp.float32), weight),
+            "clip_fraction": masked_mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32), weight),
         }
         return total, aux
 
@@ -192,7 +200,7 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         # Train on complete decisions; a pending one returns in the next rollout (smdp.py).
         decision = traj.decision.astype(bool)
         adv, ret = smdp_gae(traj.reward, traj.discount, traj.done, decision,
-                            jnp.where(decision, traj.value, 0.0), config.gae_lambda)
+                            jnp.where(decision, traj.value, 0.0), state.hp["gae_lambda"])
         episodes = episodes_with_decision(traj.done, decision)
         decision = complete_decisions(traj.done, decision)
         if config.normalize_advantages:
@@ -219,8 +227,9 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
             idx, real = mb
             batch = jax.tree.map(lambda x: x[idx], data)
             batch = batch[:-1] + (jnp.logical_and(batch[-1], real),)
-            (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch)
+            (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, state.hp)
             updates, new_opt_state = optimizer.update(grads, opt_state, params)
+            updates = scale_by_lr(updates, state.hp["learning_rate"])
             new_params = optax.apply_updates(params, updates)
             has_decision = jnp.any(batch[-1])
             params, opt_state = apply_if(has_decision, (new_params, new_opt_state), (params, opt_state))
@@ -244,6 +253,7 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
             updates=state.updates + 1,
             episodes_seen=state.episodes_seen + episodes,
             decisions_seen=state.decisions_seen + num_decisions,
+            hp=state.hp,
         )
         metrics.update(
             decisions=num_decisions,
@@ -254,4 +264,4 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         )
         return new_state, metrics
 
-    return Agent("ppo", init, act, update, policy_logits)
+    return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE)

@@ -125,6 +125,8 @@ class Controls:
       temperature (None: as the runner was built).
     side_cost: bool, a template learner is also rewarded by the decrease of its template's
       ``side_cost`` (None: never; fine-tuning turns it on).
+    gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs
+      with different discounts share one compile (a sweep).
     """
 
     learner: jax.Array
@@ -134,6 +136,7 @@ class Controls:
     continue_episodes: jax.Array | None = None
     temperature: jax.Array | None = None
     side_cost: jax.Array | None = None
+    gamma: jax.Array | None = None
 
 
 class HierarchyRunner:
@@ -357,7 +360,8 @@ class HierarchyRunner:
             (learner_on & sat[:, learner_idx]).astype(jnp.float32),
         )
         tp_steps = jnp.where(teleported >= 0, self.nominal[jnp.maximum(teleported, 0)], 1.0)
-        discount = self.gamma ** tp_steps
+        gamma = self.gamma if controls.gamma is None else controls.gamma
+        discount = gamma ** tp_steps
         shaping = self._side_cost_shaping(carry.env_state, state, discount, learner_on,
                                           learner_idx, is_root, controls)
         # In evaluation (no learner) the whole episode counts, with the environment's reward.

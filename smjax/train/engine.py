@@ -122,13 +122,14 @@ class Engine:
 
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
     def _chunk(self, state: SeedState, active, bank, learned, learner, start, teleport,
-               continue_episodes, side_cost):
+               continue_episodes, side_cost, gamma):
         """``teleport``/``continue_episodes``/``side_cost``: the levels' setting (teleports
         on, episodes reset with the learner's option unless ``TrainConfig.continue_episodes``,
         no side-cost shaping) or fine-tuning's (the learned hierarchy alone, whole task
-        episodes, side costs as ``TrainConfig.finetune_side_cost`` says)."""
+        episodes, side costs as ``TrainConfig.finetune_side_cost`` says). ``gamma``: the
+        seed's discount (traced: a sweep over it compiles once)."""
         controls = Controls(learner, start, learned, teleport, continue_episodes,
-                            side_cost=side_cost)
+                            side_cost=side_cost, gamma=gamma)
         runner, agent, cfg = self.runner, self.agent, self.cfg
 
         def update_step(st: SeedState, _):

@@ -113,7 +113,7 @@ class FinetunePhase:
                 int(stats.task_episodes[s, u]), cfg.success_window)
             host["curves"].append([self.seeds[s], self.finetune_level, "finetune",
                                    rec["episodes"][s], rec["env_steps"][s],
-                                   rec["task_running"][s]])
+                                   rec["task_running"][s], s])
             if self._tb is not None and rec["task_running"][s] is not None:
                 self._tb.add_scalar(f"seed_{self.seeds[s]}/finetune/task_success",
                                     rec["task_running"][s], rec["env_steps"][s])

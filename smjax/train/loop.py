@@ -34,6 +34,10 @@ from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
 
 
+# 2: learner states carry their sweepable hyper-parameters (state.hp)
+CHECKPOINT_FORMAT = 2
+
+
 class NonFiniteError(FloatingPointError):
     """A learner produced non-finite parameters (``run`` says which checkpoint is kept)."""
 
@@ -104,8 +108,14 @@ class HierarchyTrainer(ft.FinetunePhase):
     """Trains every planned level for all seeds, each seed at its own pace; resumable."""
 
     def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
-                 out_dir=None, progress: bool = True, run_meta: dict | None = None):
+                 out_dir=None, progress: bool = True, run_meta: dict | None = None,
+                 hp: dict | None = None, gamma: list[float] | None = None):
+        """``seeds``: one per slot (a sweep repeats them, once per point); ``hp``: per slot,
+        the learner's sweepable hyper-parameters that differ from its config, ``gamma``:
+        per slot, the discount (a sweep; default ``cfg.gamma``)."""
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
+        self.gamma = list(gamma) if gamma is not None else [engine.cfg.gamma] * len(self.seeds)
+        self.slot_hp = {k: jnp.asarray(v, jnp.float32) for k, v in (hp or {}).items()}
         self.cfg = engine.cfg
         self.cfg.check_level_names([p.name for p in plans])
         # after the levels, a seed fine-tunes (one stage more) unless it is off
@@ -118,7 +128,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         S = len(self.seeds)
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
         keys, k_init, k_reset = split_seeds(keys, 3)
-        learner = engine.init_learner(k_init)
+        learner = self._init_learner(k_init)
         self.arrays = {
             "keys": keys,
             "state": SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
@@ -170,7 +180,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         """Checkpoint (collective with several processes: all gather, process 0 writes)."""
         if self.out_dir is None:
             return
-        meta = {"host": self.host, "run": self.run_meta}
+        meta = {"host": self.host, "run": self.run_meta, "format": CHECKPOINT_FORMAT}
         arrays = dist.gather(self.arrays) if dist.is_multiprocess() else self.arrays
         if self.writer:
             ckpt.save_checkpoint(self.out_dir, self.host["chunks"], arrays, meta)
@@ -181,10 +191,11 @@ class HierarchyTrainer(ft.FinetunePhase):
         info = ckpt.shared_meta(self.out_dir) if self.out_dir is not None else None
         if info is None:
             return False
-        if "finetune" not in info["meta"]["host"]:
+        if "finetune" not in info["meta"]["host"] or info["meta"].get("format", 1) < CHECKPOINT_FORMAT:
             raise ckpt.CheckpointError(
                 f"the checkpoint in {ckpt.checkpoint_dir(self.out_dir)} was written by an older "
-                f"smjax (before the fine-tuning phase); it cannot be resumed by this one")
+                f"smjax (before learner states carried their hyper-parameters); it cannot be "
+                f"resumed by this one")
         if dist.is_multiprocess():
             like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), self.arrays)
             loaded = ckpt.load_arrays(self.out_dir, like) if self.writer else like
@@ -264,8 +275,9 @@ class HierarchyTrainer(ft.FinetunePhase):
         teleport = self._per_seed([not t for t in tuning], bool)
         keep = self._per_seed([t or self.cfg.continue_episodes for t in tuning], bool)
         side_cost = self._per_seed([t and self.cfg.finetune_side_cost for t in tuning], bool)
+        gamma = self._per_seed(self.gamma, jnp.float32)
         args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
-                learner, start, teleport, keep, side_cost)
+                learner, start, teleport, keep, side_cost, gamma)
         if self._compiled is None:  # one compile serves every level (ids are traced)
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()
@@ -296,7 +308,9 @@ class HierarchyTrainer(ft.FinetunePhase):
         self.host["wall_seconds"] = time.perf_counter() - t_start
         if self._tb is not None:
             self._tb.close()
-        return {"levels": self.host["levels"], "curves": self.host["curves"],
+        # a curve row's 7th entry is its slot (a sweep splits the rows by point)
+        return {"levels": self.host["levels"], "curves": [r[:6] for r in self.host["curves"]],
+                "curve_slots": [r[6] if len(r) > 6 else None for r in self.host["curves"]],
                 "final": by_policy[self.engine.frozen_policy], "final_by_policy": by_policy,
                 "eval_policy": self.engine.frozen_policy,
                 "finetune": self.host["finetune"] if self.ft_order else None,
@@ -315,7 +329,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         arrays = jax.tree.map(local, self.arrays)
         keys, k_init, k_reset, k_run = split_seeds(arrays["keys"], 4)
         starts = jnp.asarray([self._plan(s).start for s in range(len(self.seeds))], jnp.int32)
-        learner = self.engine.init_learner(k_init)
+        learner = self._init_learner(k_init)
         tuning = [s for s in seeds if self._finetuning(s)]
         if tuning:
             options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
@@ -330,6 +344,13 @@ class HierarchyTrainer(ft.FinetunePhase):
             for k, v in LEVEL_COUNTERS.items():
                 self.host[k][s] = [] if k == "history" else v
             self.host["started"][s] = True
+
+    def _init_learner(self, keys: jax.Array):
+        """Fresh learners per slot, with each slot's swept hyper-parameters."""
+        learner = self.engine.init_learner(keys)
+        if self.slot_hp:
+            learner = learner.replace(hp={**learner.hp, **self.slot_hp})
+        return learner
 
     def _mask(self, seeds: list[int]) -> jax.Array:
         return jnp.asarray([s in seeds for s in range(len(self.seeds))])
@@ -359,7 +380,7 @@ class HierarchyTrainer(ft.FinetunePhase):
                 host["running"][s] = None if math.isnan(run) else run
                 if not self._finetuning(s):  # (fine-tuning records the task's curve)
                     host["curves"].append([seed, plan.level, plan.name, host["episodes"][s],
-                                           host["env_steps"][s], host["running"][s]])
+                                           host["env_steps"][s], host["running"][s], s])
                 if self._tb is not None and host["running"][s] is not None:
                     tag = f"seed_{seed}/level_{plan.level}_{plan.name}"
                     self._tb.add_scalar(f"{tag}/running_success", host["running"][s],

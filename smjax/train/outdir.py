@@ -22,7 +22,8 @@ from pathlib import Path
 
 LOCK_NAME = ".smjax.lock"
 # what a run writes into its directory; --overwrite deletes exactly these
-RUN_FILES = ("results.json", "curves.csv", "curves.png", "checkpoints", "tensorboard")
+RUN_FILES = ("results.json", "curves.csv", "curves.png", "checkpoints", "tensorboard",
+             "sweep.json")
 
 
 class OutDirError(ValueError):
@@ -63,10 +64,17 @@ def _holds_checkpoint(folder: Path) -> bool:
                for c in folder.iterdir())
 
 
+def _run_names(out: Path) -> list[str]:
+    """RUN_FILES plus a sweep's ``point-<k>`` folders (those holding a results.json)."""
+    points = sorted(p.name for p in out.glob("point-*")
+                    if p.name[6:].isdigit() and (p / "results.json").is_file())
+    return list(RUN_FILES) + points
+
+
 def existing_run_files(out: Path) -> list[str]:
     """The run files ``out`` holds (a checkpoints folder only when it holds a checkpoint)."""
     found = []
-    for name in RUN_FILES:
+    for name in _run_names(out):
         p = out / name
         if name == "checkpoints" and p.is_dir():
             if _holds_checkpoint(p):
@@ -78,7 +86,7 @@ def existing_run_files(out: Path) -> list[str]:
 
 def clear_run_files(out: Path) -> None:
     """``--overwrite``: remove the previous run's files (nothing else in the directory)."""
-    for name in RUN_FILES:
+    for name in _run_names(out):
         p = out / name
         if p.is_dir():
             shutil.rmtree(p)

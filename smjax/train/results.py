@@ -160,6 +160,16 @@ def write_results(out_dir: str | Path, results: dict, curves: list[tuple]) -> No
     plot_curves([out], out / "curves.png")
 
 
+def write_sweep(out_dir: str | Path, sweep: dict) -> None:
+    """sweep.json: every point's overrides and results (without the raw arrays)."""
+    points = [{"overrides": p["overrides"],
+               "results": {k: v for k, v in p["results"].items() if k != "_raw"}}
+              for p in sweep["points"]]
+    text = json.dumps(_clean({"points": points, "compile_seconds": sweep["compile_seconds"]}),
+                      indent=2, allow_nan=False)
+    atomic_write_text(Path(out_dir) / "sweep.json", text + "\n")
+
+
 def read_curves(path: str | Path) -> list[dict]:
     """curves.csv rows as dicts (old column names renamed)."""
     with open(path, newline="") as f:

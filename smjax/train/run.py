@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from smjax.agents import make_agent
 from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
 from smjax.train import checkpoint as ckpt
@@ -15,7 +16,8 @@ from smjax.train.engine import Engine
 from smjax.train.loop import HierarchyTrainer, NonFiniteError, plan_levels, resolve_hierarchy
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
-from smjax.train.results import build_results, write_results
+from smjax.train.results import build_results, write_results, write_sweep
+from smjax.train.sweep import normalize_sweep, point_config, point_raw, slot_layout, sweep_points
 
 
 def validate_seeds(seeds) -> list[int]:
@@ -73,7 +75,7 @@ def _claim_out_dir(out_dir, resume: bool, overwrite: bool) -> DirLock | None:
 
 def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None = None, *,
         env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
-        overwrite: bool = False) -> dict:
+        overwrite: bool = False, sweep: dict | None = None) -> dict:
     """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
 
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
@@ -86,6 +88,12 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     ``out_dir`` is validated and locked before anything compiles: a directory in use by
     another run, or holding a run's files without ``resume`` or ``overwrite`` (which
     deletes them), is refused.
+
+    ``sweep`` (``{"agent.learning_rate": [1e-4, 3e-4], ...}``) trains every point of the
+    lists' cartesian product for every seed in the same one compiled program
+    (:mod:`smjax.train.sweep`) and returns ``{"points": [{"overrides", "results"}, ...],
+    "compile_seconds"}``; a point's results are those of its run alone. With ``out_dir``
+    it writes sweep.json there and each point's files under ``point-<k>/``.
     """
     enable_compilation_cache()  # a second run of the same programs skips compiling
     seeds = validate_seeds(seeds)
@@ -102,25 +110,32 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
                   file=sys.stderr)
     cfg = cfg.replace(agent=normalize_agent(cfg.algo, cfg.agent))
     env_overrides = dict(env_overrides or {})
+    if sweep is not None:  # refused before anything is locked or compiled
+        if dist.is_multiprocess():
+            raise ConfigError("a sweep runs in one process for now; drop --sweep or run it "
+                              "on one process")
+        sweep = normalize_sweep(cfg, make_agent(cfg.algo, **cfg.agent), sweep)
     if resume and out_dir is None:
         raise ValueError("resume needs the run's output directory")
     lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
     try:
-        return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume)
+        return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume, sweep)
     finally:
         if lock is not None:
             lock.release()
 
 
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides: dict,
-                progress: bool, resume: bool) -> dict:
-    from smjax.agents import make_agent
-
+                progress: bool, resume: bool, sweep: dict | None) -> dict:
+    agent = make_agent(cfg.algo, **cfg.agent)
+    points = sweep_points(sweep) if sweep is not None else None
     if isinstance(task, str):
         env, env_params = make(task, **env_overrides)
     else:
         env, env_params = task
     identity = run_identity(env.name, cfg, seeds, env_overrides)
+    if sweep is not None:  # a checkpoint of a sweep resumes only that sweep
+        identity["sweep"] = sweep
     # with several processes process 0's view of out_dir decides, so all raise alike
     existing = ckpt.shared_meta(out_dir) if out_dir is not None else None
     if resume:
@@ -134,19 +149,37 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     hierarchy_name, hierarchy = resolve_hierarchy(env, cfg)
     plans = plan_levels(hierarchy, cfg.method)
     cfg.check_level_names([p.name for p in plans])
-    check_fits(env, env_params, cfg, len(seeds))
-    agent = make_agent(cfg.algo, **cfg.agent)
+    slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
+                             else (seeds, None, None))
+    check_fits(env, env_params, cfg, len(slot_seeds))
     engine = Engine(env, env_params, hierarchy, agent, cfg)
-    trainer = HierarchyTrainer(engine, plans, seeds, out_dir=out_dir, progress=progress,
-                               run_meta=identity)
+    trainer = HierarchyTrainer(engine, plans, slot_seeds, out_dir=out_dir, progress=progress,
+                               run_meta=identity, hp=hp, gamma=gamma)
     if resume:
         trainer.restore()
     try:
         raw = trainer.run()
     except NonFiniteError as err:
         raise NonFiniteError(f"{err}; {_kept(out_dir)}") from None
-    config = cfg.to_dict() | {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides}
-    results = build_results(env.name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config)
+    extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides}
+    if points is None:
+        return _finish(env.name, cfg, seeds, raw, extra, out_dir)
+    out = {"points": [], "compile_seconds": raw["compile_seconds"]}
+    for p, point in enumerate(points):
+        part = point_raw(raw, p, len(seeds), len(slot_seeds))
+        where = None if out_dir is None else Path(out_dir) / f"point-{p}"
+        results = _finish(env.name, point_config(cfg, point), seeds, part, extra, where)
+        out["points"].append({"overrides": point, "results": results})
+    if out_dir is not None and dist.is_writer():
+        write_sweep(out_dir, out)
+    return out
+
+
+def _finish(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
+            out_dir) -> dict:
+    """results.json (and curves) of a run, or of one point of a sweep."""
+    config = cfg.to_dict() | extra
+    results = build_results(env_name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config)
     if out_dir is not None and dist.is_writer():
         write_results(out_dir, results, raw["curves"])
     results_with_raw: dict[str, Any] = dict(results)

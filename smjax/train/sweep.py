@@ -1,0 +1,134 @@
+"""Hyper-parameter sweeps in one compiled program.
+
+A sweep ``{"agent.learning_rate": [1e-4, 3e-4], "agent.ent_coef": [0.0, 0.01]}`` trains
+the cartesian product of the lists (its *points*) for every seed. Each (point, seed) pair
+is one slot of the seed axis: the slot's keys come from its seed alone and its swept
+values live in its learner state (``state.hp``, see :mod:`smjax.agents.base`), so every
+slot computes exactly what that point's run alone would give for that seed, and the whole
+sweep compiles once. Slots are point-major: slot ``p * len(seeds) + i`` is point ``p``,
+seed ``seeds[i]``.
+
+Only the fields a learner declares ``sweepable`` may vary (the others fix shapes or the
+program's structure); asking for another one is refused with a :class:`ConfigError`
+that lists the sweepable ones.
+"""
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import jax
+
+from smjax.core.overrides import parse_float
+from smjax.train.config import ConfigError, TrainConfig
+
+PREFIX = "agent."
+# TrainConfig fields that are traced per slot (the engine's chunk takes them per seed)
+TRAIN_SWEEPABLE = ("gamma",)
+
+
+def sweepable_names(agent) -> list[str]:
+    return list(TRAIN_SWEEPABLE) + [PREFIX + name for name in agent.sweepable]
+
+
+def _number(key: str, value: Any) -> float:
+    try:
+        return parse_float(f"sweep {key}", value)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+
+
+def _check_value(cfg: TrainConfig, key: str, value: float) -> None:
+    """The value must be valid for its config (the config's own range check)."""
+    from smjax.agents import make_config
+
+    try:
+        if key.startswith(PREFIX):
+            make_config(cfg.algo, **(cfg.agent | {key[len(PREFIX):]: value}))
+        else:
+            cfg.replace(**{key: value})
+    except ValueError as err:
+        raise ConfigError(f"sweep {key}: {err}") from None
+
+
+def normalize_sweep(cfg: TrainConfig, agent, sweep: dict) -> dict[str, list[float]]:
+    """``sweep`` checked, as ``{"agent.field": [floats]}`` (what a checkpoint records)."""
+    if not isinstance(sweep, dict) or not sweep:
+        raise ConfigError("a sweep needs at least one field, e.g. {'agent.learning_rate': [1e-4, 3e-4]}")
+    allowed = sweepable_names(agent)
+    lists = {}
+    for key, values in sweep.items():
+        if key not in allowed:
+            raise ConfigError(f"{key!r} cannot be swept with algo {cfg.algo!r}; sweepable: "
+                              f"{', '.join(allowed) or 'none'}")
+        values = list(values) if isinstance(values, (list, tuple)) else [values]
+        if not values:
+            raise ConfigError(f"sweep {key}: needs at least one value")
+        lists[key] = [_number(key, v) for v in values]
+        for v in lists[key]:
+            _check_value(cfg, key, v)
+    return lists
+
+
+def sweep_points(lists: dict[str, list[float]]) -> list[dict]:
+    """The points (``{"agent.field": value}`` each) of a normalized sweep, in the order of
+    ``itertools.product`` over its lists."""
+    return [dict(zip(lists, combo)) for combo in itertools.product(*lists.values())]
+
+
+def parse_sweep_flags(items: list[str]) -> dict[str, list[str]]:
+    """``--sweep FIELD=V1,V2`` flags as ``{FIELD: [V1, V2]}`` (values checked by ``run``)."""
+    out: dict[str, list[str]] = {}
+    for item in items:
+        key, sep, values = item.partition("=")
+        if not sep or not key.strip() or not values.strip():
+            raise ConfigError(f"--sweep must look like FIELD=V1,V2,... (e.g. "
+                              f"agent.learning_rate=1e-4,3e-4), got {item!r}")
+        if key.strip() in out:
+            raise ConfigError(f"--sweep {key.strip()} is given twice; list its values once")
+        out[key.strip()] = [v.strip() for v in values.split(",")]
+    return out
+
+
+def slot_layout(cfg: TrainConfig, points: list[dict], seeds: list[int]) -> tuple:
+    """Per slot (point-major): its seed, its learner's swept values (per field) and its
+    discount."""
+    slot_seeds = [s for _ in points for s in seeds]
+    hp = {key[len(PREFIX):]: [p[key] for p in points for _ in seeds]
+          for key in points[0] if key.startswith(PREFIX)}
+    gamma = [point_config(cfg, p).gamma for p in points for _ in seeds]
+    return slot_seeds, hp, gamma
+
+
+def point_config(cfg: TrainConfig, point: dict) -> TrainConfig:
+    """The config that, run alone, is this point."""
+    agent = {k[len(PREFIX):]: v for k, v in point.items() if k.startswith(PREFIX)}
+    train = {k: v for k, v in point.items() if not k.startswith(PREFIX)}
+    return cfg.replace(agent=cfg.agent | agent, **train)
+
+
+def _slice_lists(record: Any, lo: int, hi: int, num_slots: int) -> Any:
+    """Per-slot lists (length ``num_slots``) of a host record, cut to ``[lo, hi)``."""
+    if isinstance(record, dict):
+        return {k: _slice_lists(v, lo, hi, num_slots) for k, v in record.items()}
+    if isinstance(record, list) and len(record) == num_slots:
+        return record[lo:hi]
+    return record
+
+
+def point_raw(raw: dict, p: int, num_seeds: int, num_slots: int) -> dict:
+    """The trainer's raw results of point ``p`` alone (what its run alone returns)."""
+    lo, hi = p * num_seeds, (p + 1) * num_seeds
+    out = dict(raw)
+    out["levels"] = [_slice_lists(rec, lo, hi, num_slots) for rec in raw["levels"]]
+    out["finetune"] = (None if raw.get("finetune") is None
+                       else _slice_lists(raw["finetune"], lo, hi, num_slots))
+    rows = [(row, slot) for row, slot in zip(raw["curves"], raw["curve_slots"]) if lo <= slot < hi]
+    out["curves"] = [row for row, _ in rows]
+    out["curve_slots"] = [slot - lo for _, slot in rows]
+    cut = lambda x: x[lo:hi]  # noqa: E731
+    out["final"] = jax.tree.map(cut, raw["final"])
+    out["final_by_policy"] = jax.tree.map(cut, raw["final_by_policy"])
+    out["bank"] = jax.tree.map(cut, raw["bank"])
+    out["learned"] = raw["learned"][lo:hi]
+    return out
