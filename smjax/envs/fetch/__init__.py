@@ -14,6 +14,14 @@ Rendering uses MuJoCo's offscreen renderer: set ``MUJOCO_GL=egl`` (GPU/headless 
 """
 from __future__ import annotations
 
+import contextlib
+import io
+
+# MuJoCo prints on import that its optional warp backend is missing ("Failed to import
+# warp"); smjax uses MJX's JAX backend, so the note is noise in every command's output
+with contextlib.redirect_stdout(io.StringIO()):
+    from mujoco import mjx  # noqa: F401
+
 from smjax.envs.fetch.env import FetchEnv, make_fetch, register_all
 from smjax.envs.fetch.model import PhysicsConfig
 from smjax.envs.fetch.types import FetchConfig, FetchParams, FetchState
