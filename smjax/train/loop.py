@@ -28,7 +28,7 @@ from smjax.train import checkpoint as ckpt
 from smjax.train import finetune as ft
 from smjax.train.seed_arrays import all_finite, fold_in, freeze, local, select_seeds, split_seeds
 from smjax.train import distributed as dist
-from smjax.train.config import TrainConfig
+from smjax.train.config import ConfigError, TrainConfig
 from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
 from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
@@ -50,8 +50,18 @@ class LevelPlan:
     level: int       # the paper's level number
 
 
-def resolve_hierarchy(env, cfg: TrainConfig) -> tuple[str, Hierarchy]:
-    """The hierarchy a run uses: "flat" for the flat method, else the named or default one."""
+def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
+                      ) -> tuple[str, Hierarchy]:
+    """The hierarchy a run uses: ``given`` (one declared by the caller, named
+    ``declared:<task>``), else "flat" for the flat method, else the named or default one."""
+    if given is not None:
+        if not isinstance(given, Hierarchy):
+            raise ConfigError(f"hierarchy must be a name or a smjax.options.Hierarchy (e.g. from "
+                              f"declare(env, task, children)), got {type(given).__name__}")
+        if cfg.method == "flat":
+            raise ConfigError("the flat method trains the environment's flat hierarchy; a "
+                              "declared hierarchy is for top-down or bottom-up")
+        return f"declared:{given.task}", given
     options = env.hierarchies()
     if not options:
         raise ValueError(f"environment {env.name!r} declares no hierarchies")
@@ -62,6 +72,13 @@ def resolve_hierarchy(env, cfg: TrainConfig) -> tuple[str, Hierarchy]:
         raise ValueError(
             f"unknown hierarchy {name!r} for {env.name!r}; valid: {', '.join(options)}")
     return name, options[name]
+
+
+def declared_identity(h: Hierarchy) -> dict:
+    """What a resume must find again of a declared hierarchy (its shape and template names;
+    the templates' functions cannot be compared)."""
+    return {"task": h.task, "children": {k: list(v) for k, v in h.children.items()},
+            "templates": sorted(h.templates)}
 
 
 def plan_levels(h: Hierarchy, method: str) -> list[LevelPlan]:

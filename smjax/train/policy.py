@@ -12,14 +12,16 @@ from smjax.options.runner import NO_OPTION, Controls
 from smjax.train import checkpoint as ckpt
 from smjax.train.config import TrainConfig
 from smjax.train.engine import Engine
-from smjax.train.loop import HierarchyTrainer, plan_levels, resolve_hierarchy
+from smjax.train.loop import HierarchyTrainer, declared_identity, plan_levels, resolve_hierarchy
 
 
-def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None = None):
+def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None = None,
+                 hierarchy=None):
     """(engine, bank, learned, seeds) of the run checkpointed in ``run_dir``.
 
     A run stopped before its last level would play a partly untrained hierarchy: refused
-    unless ``partial``. ``task``, when given, must be the run's task."""
+    unless ``partial``. ``task``, when given, must be the run's task. A run trained with a
+    declared hierarchy (``run(..., hierarchy=Hierarchy)``) needs the same one here."""
     from smjax.agents import make_agent
 
     info = ckpt.load_meta(run_dir)
@@ -30,8 +32,15 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
         raise ValueError(f"{run_dir} is a run of {run['task']!r}, not {task!r}")
     fields = set(TrainConfig.__dataclass_fields__)
     cfg = TrainConfig.from_dict({k: v for k, v in run.items() if k in fields})
+    declared = run.get("hierarchy_declared")
+    if declared is not None and hierarchy is None:
+        raise ValueError(f"{run_dir} was trained with a hierarchy declared in code "
+                         f"({declared['task']!r}); pass the same Hierarchy (hierarchy=...) to "
+                         f"load or play it")
+    if hierarchy is not None and (declared is None or declared_identity(hierarchy) != declared):
+        raise ValueError(f"{run_dir} was not trained with this hierarchy")
     env, params = make(run["task"], **run["env_overrides"])
-    _, hierarchy = resolve_hierarchy(env, cfg)
+    _, hierarchy = resolve_hierarchy(env, cfg, hierarchy)
     engine = Engine(env, params, hierarchy, make_agent(cfg.algo, **cfg.agent), cfg)
     trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), run["seeds"],
                                out_dir=run_dir, progress=False, run_meta=run)
@@ -45,9 +54,10 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
 
 
 def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 500, key=None,
-                 partial: bool = False, task: str | None = None):
+                 partial: bool = False, task: str | None = None, hierarchy=None):
     """States of one episode of the trained hierarchy (no teleports), seed ``seed_index``."""
-    engine, bank, learned, seeds = load_trained(run_dir, partial=partial, task=task)
+    engine, bank, learned, seeds = load_trained(run_dir, partial=partial, task=task,
+                                                hierarchy=hierarchy)
     if not 0 <= seed_index < len(seeds):
         raise ValueError(f"seed_index must be in [0, {len(seeds)}), got {seed_index}")
     bank = jax.tree.map(lambda x: x[seed_index], bank)

@@ -13,7 +13,9 @@ from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
 from smjax.train.config import ConfigError, TrainConfig, config_differences, normalize_agent
 from smjax.train.engine import Engine
-from smjax.train.loop import HierarchyTrainer, NonFiniteError, plan_levels, resolve_hierarchy
+from smjax.options.hierarchy import Hierarchy
+from smjax.train.loop import (HierarchyTrainer, NonFiniteError, declared_identity, plan_levels,
+                              resolve_hierarchy)
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.results import build_results, write_results, write_sweep
@@ -75,7 +77,8 @@ def _claim_out_dir(out_dir, resume: bool, overwrite: bool) -> DirLock | None:
 
 def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None = None, *,
         env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
-        overwrite: bool = False, sweep: dict | None = None) -> dict:
+        overwrite: bool = False, sweep: dict | None = None,
+        hierarchy: Hierarchy | str | None = None) -> dict:
     """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
 
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
@@ -89,6 +92,11 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     another run, or holding a run's files without ``resume`` or ``overwrite`` (which
     deletes them), is refused.
 
+    ``hierarchy``: a name from the environment's catalogue (as ``cfg.hierarchy``), or a
+    :class:`~smjax.options.Hierarchy` declared by the caller (``declare(env, task,
+    children)``, templates of its own included): no subclass needed. A declared hierarchy's
+    shape is part of the run's identity; resume by passing the same one again.
+
     ``sweep`` (``{"agent.learning_rate": [1e-4, 3e-4], ...}``) trains every point of the
     lists' cartesian product for every seed in the same one compiled program
     (:mod:`smjax.train.sweep`) and returns ``{"points": [{"overrides", "results"}, ...],
@@ -97,6 +105,11 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     """
     enable_compilation_cache()  # a second run of the same programs skips compiling
     seeds = validate_seeds(seeds)
+    if isinstance(hierarchy, str):  # a catalogue name: the config's field says it
+        if cfg.hierarchy not in (None, hierarchy):
+            raise ConfigError(f"hierarchy {hierarchy!r} contradicts the config's hierarchy "
+                              f"{cfg.hierarchy!r}; give one of them")
+        cfg, hierarchy = cfg.replace(hierarchy=hierarchy), None
     cfg.validate()
     if cfg.finetune_on and dist.is_multiprocess():
         # measured: two processes deadlock once a seed starts fine-tuning (tests/test_distributed.py)
@@ -119,21 +132,26 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
         raise ValueError("resume needs the run's output directory")
     lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
     try:
-        return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume, sweep)
+        return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume, sweep,
+                           hierarchy)
     finally:
         if lock is not None:
             lock.release()
 
 
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides: dict,
-                progress: bool, resume: bool, sweep: dict | None) -> dict:
+                progress: bool, resume: bool, sweep: dict | None,
+                given: Hierarchy | None = None) -> dict:
     agent = make_agent(cfg.algo, **cfg.agent)
     points = sweep_points(sweep) if sweep is not None else None
     if isinstance(task, str):
         env, env_params = make(task, **env_overrides)
     else:
         env, env_params = task
+    hierarchy_name, hierarchy = resolve_hierarchy(env, cfg, given)
     identity = run_identity(env.name, cfg, seeds, env_overrides)
+    if given is not None:  # its shape must match on resume
+        identity["hierarchy_declared"] = declared_identity(given)
     if sweep is not None:  # a checkpoint of a sweep resumes only that sweep
         identity["sweep"] = sweep
     # with several processes process 0's view of out_dir decides, so all raise alike
@@ -146,7 +164,6 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
         raise FileExistsError(
             f"{out_dir} already holds a checkpointed run; pass resume (--resume) to continue it "
             f"or choose another output directory")
-    hierarchy_name, hierarchy = resolve_hierarchy(env, cfg)
     plans = plan_levels(hierarchy, cfg.method)
     cfg.check_level_names([p.name for p in plans])
     slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
