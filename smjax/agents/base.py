@@ -3,14 +3,8 @@
 ``Transition`` and ``ActOutput`` live in ``smjax.core.transition`` (below both the option
 machinery and the learners) and are re-exported here.
 
-A rollout is a sequence of *ticks*; in every tick every environment takes one primitive
-step. The learner does not decide in every tick: while an option it called is running
-(or while the levels above have not yet called the learner's template) other policies
-act. ``Transition.decision`` marks the ticks where the learner chose; rewards and
-discounts of the ticks in between belong to the learner's previous decision, which is
-how an option that ran k ticks earns ``sum_i gamma^i r_i`` and a ``gamma^k`` bootstrap
-(SMDP). ``discount`` is per tick: ``gamma`` normally, ``gamma**d`` for a tick in which a
-template was teleported (d = the template's nominal duration).
+What a tick is, and how an option's ticks add up to one SMDP decision, is told in
+``smjax.core.transition``.
 
 An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over:
 
