@@ -123,8 +123,8 @@ class Controls:
       as the runner was built); its next episode starts where the levels above call it again.
     temperature: float, how frozen policies pick: 0 greedy (argmax), else a sample at this
       temperature (None: as the runner was built).
-    side_cost: bool, a template learner is also rewarded by the decrease of its template's
-      ``side_cost`` (None: never; fine-tuning turns it on).
+    side_cost: float weight (or bool), a template learner is also rewarded by this times the
+      decrease of its template's ``side_cost`` (None or 0: never; fine-tuning turns it on).
     gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs
       with different discounts share one compile (a sweep).
     """
@@ -412,14 +412,15 @@ class HierarchyRunner:
     def _side_cost_shaping(self, before, after, discount, learner_on, learner_idx, is_root,
                            controls: Controls):
         """A template learner's extra reward ``c(s) - discount * c(s')`` for its template's
-        ``side_cost`` c, where ``controls.side_cost`` asks for it (0 elsewhere). Summed over
+        ``side_cost`` c, times the weight ``controls.side_cost`` (0 elsewhere). Summed over
         the option's run it telescopes to minus the discounted cost it ends with, above what
         it started with."""
         if controls.side_cost is None or not any(t.side_cost is not None for t in self.templates):
             return 0.0
         c0 = jax.vmap(self._side_cost)(before)[:, learner_idx]
         c1 = jax.vmap(self._side_cost)(after)[:, learner_idx]
-        return jnp.where(controls.side_cost & learner_on & ~is_root, c0 - discount * c1, 0.0)
+        weight = jnp.asarray(controls.side_cost, jnp.float32)
+        return jnp.where(learner_on & ~is_root, weight * (c0 - discount * c1), 0.0)
 
     def _act_frozen(self, learner_state, obs, mask, key, controls: Controls) -> ActOutput:
         """The learner picks as the bank will run it once frozen (the level's gate); with no

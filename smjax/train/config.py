@@ -95,6 +95,7 @@ class TrainConfig:
         decrease of its template's ``side_cost`` where the environment defines one (Craft:
         items held beyond the one promised), so its run stops leaving behind what the task's
         reward penalises; F_o success and the levels are unchanged.
+      finetune_side_cost_weight: the side costs' weight (1: as the templates declare them).
       checkpoint_every: seconds between checkpoints when an output directory is given
         (0: after every chunk); a checkpoint is also written at the end of every level.
     """
@@ -126,6 +127,7 @@ class TrainConfig:
     finetune_turn_episodes: int = 2_000
     finetune_max_episodes: int = 20_000
     finetune_side_cost: bool = True
+    finetune_side_cost_weight: float = 1.0
     checkpoint_every: float = 60.0
     tensorboard: bool = False
     agent: dict = field(default_factory=dict)
@@ -170,6 +172,10 @@ class TrainConfig:
         need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
         need(isinstance(self.gate, bool), "gate", "true or false")
         need(isinstance(self.finetune_side_cost, bool), "finetune_side_cost", "true or false")
+        need(isinstance(self.finetune_side_cost_weight, (int, float))
+             and not isinstance(self.finetune_side_cost_weight, bool)
+             and 0 <= self.finetune_side_cost_weight <= 100, "finetune_side_cost_weight",
+             "a number in [0, 100]")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
         if "gamma" in self.agent:  # one source: the trainer discounts with TrainConfig.gamma
             raise ConfigError(f"agent field 'gamma' = {self.agent['gamma']!r} would be ignored: the "

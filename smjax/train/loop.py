@@ -291,7 +291,8 @@ class HierarchyTrainer(ft.FinetunePhase):
         tuning = [self._finetuning(s) for s in range(S)]
         teleport = self._per_seed([not t for t in tuning], bool)
         keep = self._per_seed([t or self.cfg.continue_episodes for t in tuning], bool)
-        side_cost = self._per_seed([t and self.cfg.finetune_side_cost for t in tuning], bool)
+        weight = self.cfg.finetune_side_cost_weight if self.cfg.finetune_side_cost else 0.0
+        side_cost = self._per_seed([weight if t else 0.0 for t in tuning], jnp.float32)
         gamma = self._per_seed(self.gamma, jnp.float32)
         args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
                 learner, start, teleport, keep, side_cost, gamma)
