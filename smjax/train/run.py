@@ -6,7 +6,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from smjax.agents import make_agent
 from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
 from smjax.train import checkpoint as ckpt
@@ -127,6 +126,8 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
         if dist.is_multiprocess():
             raise ConfigError("a sweep runs in one process for now; drop --sweep or run it "
                               "on one process")
+        from smjax.agents import make_agent  # (imported late: tests replace it)
+
         sweep = normalize_sweep(cfg, make_agent(cfg.algo, **cfg.agent), sweep)
     if resume and out_dir is None:
         raise ValueError("resume needs the run's output directory")
@@ -142,6 +143,8 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides: dict,
                 progress: bool, resume: bool, sweep: dict | None,
                 given: Hierarchy | None = None) -> dict:
+    from smjax.agents import make_agent  # (imported late: tests replace it)
+
     agent = make_agent(cfg.algo, **cfg.agent)
     points = sweep_points(sweep) if sweep is not None else None
     if isinstance(task, str):
