@@ -184,25 +184,24 @@ class HierarchyRunner:
         self.controller_families = _families([t.controller for t in tpls])
 
     # ---- per-environment template evaluations (unbatched) ------------------
+    def _per_option(self, state, field: str, root, dtype) -> jax.Array:
+        """[O]: ``root`` for the root option, then each template's ``field`` on ``state``
+        (``root`` too where a template leaves that optional field unset)."""
+        fns = [getattr(t, field) for t in self.templates]
+        vals = [root] + [root if fn is None else fn(state, self.env_params) for fn in fns]
+        return jnp.stack([jnp.asarray(v, dtype).reshape(()) for v in vals])
+
     def _satisfied(self, state) -> jax.Array:
-        vals = [jnp.asarray(False)] + [t.satisfied(state, self.env_params) for t in self.templates]
-        return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
+        return self._per_option(state, "satisfied", False, bool)
 
     def _side_cost(self, state) -> jax.Array:
-        vals = [jnp.asarray(0.0)] + [
-            t.side_cost(state, self.env_params) if t.side_cost is not None else jnp.asarray(0.0)
-            for t in self.templates]
-        return jnp.stack([jnp.asarray(v, jnp.float32).reshape(()) for v in vals])
+        return self._per_option(state, "side_cost", 0.0, jnp.float32)
 
     def _failed(self, state) -> jax.Array:
-        vals = [jnp.asarray(False)] + [
-            t.failed(state, self.env_params) if t.failed is not None else jnp.asarray(False)
-            for t in self.templates]
-        return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
+        return self._per_option(state, "failed", False, bool)
 
     def _initiation(self, state) -> jax.Array:
-        vals = [jnp.asarray(True)] + [t.initiation(state, self.env_params) for t in self.templates]
-        return jnp.stack([jnp.asarray(v, bool).reshape(()) for v in vals])
+        return self._per_option(state, "initiation", True, bool)
 
     def teleports_on(self, controls: Controls) -> jax.Array:
         """bool: unlearned templates with a teleport jump (else they are not callable)."""
