@@ -29,6 +29,7 @@ sample and layer; a backward pass is counted as twice the forward).
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import statistics
 import time
@@ -113,7 +114,14 @@ def profile(args) -> dict:
 
     # the whole chunk, as the trainer calls it (no donation here, so it can repeat)
     chunk = jax.vmap(engine._chunk)
-    record("chunk", lambda st: chunk(st, active, bank, learned, learners, starts)[1], (state,))
+    # a level's per-seed switches, those this tree's chunk takes (older trees take fewer)
+    level = {"teleport": jnp.ones((S,), bool), "continue_episodes": jnp.zeros((S,), bool),
+             "side_cost": jnp.zeros((S,), jnp.float32),
+             "gamma": jnp.full((S,), cfg.gamma, jnp.float32)}
+    takes = inspect.signature(engine._chunk).parameters
+    switches = tuple(v for k, v in level.items() if k in takes)
+    record("chunk", lambda st: chunk(st, active, bank, learned, learners, starts, *switches)[1],
+           (state,))
 
     def rollout_one(st: SeedState, bank_s, learned_s):
         controls = Controls(learner_id, start, learned_s)
