@@ -169,3 +169,23 @@ def test_dqn_prefers_the_option_with_the_best_smdp_value():
     q = make_agent("dqn").policy_logits(state.params, option_observation(jnp.arange(EPISODE_TICKS - 2)))
     assert np.all(np.argmax(q, -1) == 0)
     assert float(metrics["chose_option0"][-5:].mean()) > 0.85
+
+
+def test_swept_hyper_parameters_are_read_from_the_state():
+    """A state whose ``hp`` holds other values trains exactly as a config with those values
+    (a sweep puts each point's values there and compiles once)."""
+    swept = dict(epsilon_end=0.2, epsilon_decay_steps=30, target_update_period=3, tau=0.5,
+                 reward_scale=0.25, learning_rate=3e-3)
+    common = dict(learning_starts=1, gradient_steps_per_update=4)
+    direct = make_agent("dqn", **common, **swept)
+    other = make_agent("dqn", **common)  # the defaults, overridden through state.hp only
+    s_direct, m_direct = direct.update(_init(direct), random_traj(3, 12, 4), jax.random.PRNGKey(1))
+    s_other = _init(other)
+    s_other = s_other.replace(hp={k: jnp.asarray(swept.get(k, v), jnp.float32)
+                                  for k, v in s_other.hp.items()})
+    assert set(s_other.hp) == set(swept)
+    s_other, m_other = other.update(s_other, random_traj(3, 12, 4), jax.random.PRNGKey(1))
+    for a, b in zip(jax.tree.leaves((s_direct.params, s_direct.target_params, s_direct.buffer)),
+                    jax.tree.leaves((s_other.params, s_other.target_params, s_other.buffer))):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(m_direct["epsilon"], m_other["epsilon"])

@@ -104,13 +104,16 @@ class DQNState:
 
 
 # the config fields DQN reads from ``state.hp`` (traced: a sweep compiles once)
-SWEEPABLE = ("learning_rate",)
+# (shapes and the program's structure stay closed over: sizes, buffer, batch, the flags)
+SWEEPABLE = ("learning_rate", "epsilon_end", "epsilon_decay_steps", "target_update_period", "tau",
+             "reward_scale")
 
 
-def linear_epsilon(config: DQNConfig, grad_steps: jax.Array, decisions_seen: jax.Array) -> jax.Array:
+def linear_epsilon(config: DQNConfig, hp: dict, grad_steps: jax.Array,
+                   decisions_seen: jax.Array) -> jax.Array:
     progress = grad_steps if config.epsilon_schedule_unit == "gradient_steps" else decisions_seen
-    frac = jnp.clip(progress.astype(jnp.float32) / config.epsilon_decay_steps, 0.0, 1.0)
-    return config.epsilon_start + frac * (config.epsilon_end - config.epsilon_start)
+    frac = jnp.clip(progress.astype(jnp.float32) / hp["epsilon_decay_steps"], 0.0, 1.0)
+    return config.epsilon_start + frac * (hp["epsilon_end"] - config.epsilon_start)
 
 
 def insert(buffer: ReplayBuffer, items: dict, valid: jax.Array) -> ReplayBuffer:
@@ -178,7 +181,7 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
 
     def act(state: DQNState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
         q = q_values(state.params, obs)
-        epsilon = linear_epsilon(config, state.grad_steps, state.decisions_seen)
+        epsilon = linear_epsilon(config, state.hp, state.grad_steps, state.decisions_seen)
         key_explore, key_random = jax.random.split(key)
         random_action = sample_from_log_probs(key_random, jnp.log(uniform_allowed_probs(mask)), mask)
         explore = jax.random.uniform(key_explore, mask.shape[:-1]) < epsilon
@@ -210,9 +213,11 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
         updates = scale_by_lr(updates, state.hp["learning_rate"])
         params = optax.apply_updates(state.params, updates)
         grad_steps = state.grad_steps + 1
-        sync = grad_steps % config.target_update_period == 0
+        period = jnp.round(state.hp["target_update_period"]).astype(jnp.int32)
+        sync = grad_steps % period == 0
+        tau = state.hp["tau"]
         target = jax.tree.map(
-            lambda t, p: jnp.where(sync, config.tau * p + (1.0 - config.tau) * t, t),
+            lambda t, p: jnp.where(sync, tau * p + (1.0 - tau) * t, t),
             state.target_params, params)
         # Before learning_starts nothing changes (the buffer is still filling). Select only
         # the learned parts: a select over the buffer would copy it on every step.
@@ -235,7 +240,7 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
                               traj.obs, traj.action_mask)
         flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
         items = {"obs": flat(traj.obs), "action": flat(traj.action),
-                 "reward": flat(tr.reward) * config.reward_scale, "discount": flat(tr.discount),
+                 "reward": flat(tr.reward) * state.hp["reward_scale"], "discount": flat(tr.discount),
                  "terminal": flat(tr.terminal), "next_obs": flat(tr.next_obs),
                  "next_mask": flat(tr.next_mask)}
         num_decisions = tr.valid.sum().astype(jnp.int32)  # each counted once, when complete
@@ -253,7 +258,7 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
         metrics.update(
             decisions=num_decisions,
             buffer_size=state.buffer.size,
-            epsilon=linear_epsilon(config, state.grad_steps, state.decisions_seen),
+            epsilon=linear_epsilon(config, state.hp, state.grad_steps, state.decisions_seen),
             episodes_seen=state.episodes_seen,
             grad_steps=state.grad_steps,
         )
@@ -264,7 +269,7 @@ def make_agent(config: DQNConfig | None = None) -> Agent:
 
     def warm_start(state: DQNState, params) -> DQNState:
         # the target starts equal to the trained net; exploration at its final epsilon
-        seen = jnp.asarray(config.epsilon_decay_steps, jnp.int32)
+        seen = jnp.ceil(state.hp["epsilon_decay_steps"]).astype(jnp.int32)
         return state.replace(params=params, target_params=params, decisions_seen=seen,
                              grad_steps=jnp.maximum(state.grad_steps, seen))
 

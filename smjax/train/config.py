@@ -12,7 +12,8 @@ ALGOS = ("ppo", "dqn", "actor-critic")
 FROZEN_POLICIES = ("auto", "greedy", "sample")
 FINETUNE_CHOICES = ("auto", "on", "off")
 # what ``TrainConfig.levels`` may override per template
-LEVEL_FIELDS = ("threshold", "max_episodes_per_level", "max_steps_per_level", "success_window")
+LEVEL_FIELDS = ("threshold", "max_episodes_per_level", "max_steps_per_level", "success_window",
+                "gamma")
 
 
 class ConfigError(ValueError):
@@ -42,7 +43,9 @@ class TrainConfig:
         episodes differ in length (football games, Fetch).
       levels: per-template overrides, e.g. ``{"attack": {"threshold": 0.3,
         "max_steps_per_level": 1_500_000}}``; keys are template names of the hierarchy
-        (checked when training starts) and values override ``LEVEL_FIELDS``.
+        (checked when training starts) and values override ``LEVEL_FIELDS``. A level's
+        ``gamma`` is that learner's discount, in its level and in its fine-tuning turns,
+        and wins over a swept gamma.
       gamma: discount per primitive tick (gamma**d for a teleported call of duration d).
       frozen_policy: how trained options act when frozen (auto: greedy for dqn, else sample).
       continue_episodes: top-down/bottom-up only: do not reset the environment when the

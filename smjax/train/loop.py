@@ -277,6 +277,11 @@ class HierarchyTrainer(ft.FinetunePhase):
     def _level_cfg(self, s: int) -> TrainConfig:
         return self.cfg.for_level(self._plan(s).name)
 
+    def _gamma(self, s: int) -> float:
+        """A slot's discount: its level's own (``levels[name]["gamma"]``), else the slot's
+        (``cfg.gamma``, or its sweep point's)."""
+        return self.cfg.levels.get(self._plan(s).name, {}).get("gamma", self.gamma[s])
+
     def _per_seed(self, values, dtype) -> jax.Array:
         return self._place_small(jnp.asarray(values, dtype))
 
@@ -293,7 +298,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         keep = self._per_seed([t or self.cfg.continue_episodes for t in tuning], bool)
         weight = self.cfg.finetune_side_cost_weight if self.cfg.finetune_side_cost else 0.0
         side_cost = self._per_seed([weight if t else 0.0 for t in tuning], jnp.float32)
-        gamma = self._per_seed(self.gamma, jnp.float32)
+        gamma = self._per_seed([self._gamma(s) for s in range(S)], jnp.float32)
         args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
                 learner, start, teleport, keep, side_cost, gamma)
         if self._compiled is None:  # one compile serves every level (ids are traced)

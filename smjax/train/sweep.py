@@ -38,6 +38,17 @@ def _number(key: str, value: Any) -> float:
         raise ConfigError(str(err)) from None
 
 
+def _integral_field(cfg: TrainConfig, key: str) -> bool:
+    """Whether ``key`` is an integer field of its config (a period, a number of steps)."""
+    from smjax.agents import make_config
+
+    if key.startswith(PREFIX):
+        default = getattr(make_config(cfg.algo), key[len(PREFIX):], None)
+    else:
+        default = getattr(cfg, key, None)
+    return isinstance(default, int) and not isinstance(default, bool)
+
+
 def _check_value(cfg: TrainConfig, key: str, value: float) -> None:
     """The value must be valid for its config (the config's own range check)."""
     from smjax.agents import make_config
@@ -56,6 +67,10 @@ def normalize_sweep(cfg: TrainConfig, agent, sweep: dict) -> dict[str, list[floa
     if not isinstance(sweep, dict) or not sweep:
         raise ConfigError("a sweep needs at least one field, e.g. {'agent.learning_rate': [1e-4, 3e-4]}")
     allowed = sweepable_names(agent)
+    fixed = sorted(name for name, fields in cfg.levels.items() if "gamma" in fields)
+    if "gamma" in sweep and fixed:
+        raise ConfigError(f"gamma cannot be swept while levels {fixed} set their own gamma "
+                          f"(a level's gamma wins); drop one of the two")
     lists = {}
     for key, values in sweep.items():
         if key not in allowed:
@@ -65,6 +80,11 @@ def normalize_sweep(cfg: TrainConfig, agent, sweep: dict) -> dict[str, list[floa
         if not values:
             raise ConfigError(f"sweep {key}: needs at least one value")
         lists[key] = [_number(key, v) for v in values]
+        if _integral_field(cfg, key):  # an integer field takes integer values (kept as ints)
+            bad = [v for v in lists[key] if not float(v).is_integer()]
+            if bad:
+                raise ConfigError(f"sweep {key}: needs integer values, got {bad[0]!r}")
+            lists[key] = [int(v) for v in lists[key]]
         for v in lists[key]:
             _check_value(cfg, key, v)
     return lists

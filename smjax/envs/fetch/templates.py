@@ -132,6 +132,8 @@ def make_hierarchies(env) -> dict:
     only once the tower stands; see the module docstring). Level 2 keeps ``noop``.
     ``paper_hold_all``: ``hold`` at level 2 as well, which leaves a ``place_i`` learner no
     do-nothing at all (``place_i`` runs only while block i is not in place).
+    ``root_only``: ``paper_hold``'s root over scripted ``place_i`` leaves, so only the root
+    learns (a quick way to study the root apart: a top-down run is one level).
     """
     n = env.num_blocks
     places = [f"place_{i}" for i in range(n)]
@@ -145,4 +147,5 @@ def make_hierarchies(env) -> dict:
             + ["noop"]}
     return {"paper": declare(env, "stack", paper), "flat": declare(env, "stack", flat),
             "paper_hold": declare(env, "stack", paper_hold),
-            "paper_hold_all": declare(env, "stack", paper_hold_all)}
+            "paper_hold_all": declare(env, "stack", paper_hold_all),
+            "root_only": declare(env, "stack", {"stack": places + ["hold"]})}
