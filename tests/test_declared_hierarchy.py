@@ -1,14 +1,16 @@
 """A hierarchy passed to ``run`` as an argument (issue 17): declared inline, no subclass."""
 import dataclasses
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import smjax
 from hier_env import make_keydoor
-from smjax.options import declare
+from smjax.options import HierarchyError, declare
 from smjax.train import TrainConfig
 from smjax.train.config import ConfigError
+from smjax.train.loop import declared_identity
 from smjax.train.policy import load_trained
 from smjax.train.run import run
 
@@ -89,3 +91,78 @@ def test_bad_hierarchy_arguments_are_refused_before_training(tmp_path):
     with pytest.raises(ConfigError, match="contradicts"):
         run("craft/make_stick", CFG.replace(hierarchy="recipe"), [0], env_overrides=ENV,
             progress=False, hierarchy="flat")
+
+
+# ---- a declared task success (success=) ---------------------------------------------------
+
+SUCCESS_CFG = KEYDOOR_CFG.replace(finetune="off", max_episodes_per_level=200, success_window=32)
+
+
+def _keydoor_h(env, **kw):
+    return declare(env, "open_door", {"open_door": ["give_key", "primitives"],
+                                      "give_key": ["primitives"]}, **kw)
+
+
+def _numbers(res):
+    """What a run computed (not how long it took)."""
+    levels = [{k: lv[k] for k in ("template", "episodes", "env_steps", "reached",
+                                  "final_running_success", "gate_success", "gate_attempts",
+                                  "gate_env_steps")} for lv in res["levels"]]
+    return levels, res["final_success"], res["episodes_to_threshold"]
+
+
+def test_a_success_equal_to_the_default_gives_identical_numbers():
+    """KeyDoor reports no info["success"], so the root's success is the episode return: 1
+    exactly where the door ends the episode open. Declaring that as success= changes nothing."""
+    env, params = make_keydoor()
+    env.success_in_unit_interval = True  # both runs' gates may stop early alike
+    base = run((env, params), SUCCESS_CFG, [0, 1], progress=False, hierarchy=_keydoor_h(env))
+    same = run((env, params), SUCCESS_CFG, [0, 1], progress=False,
+               hierarchy=_keydoor_h(env, success=lambda s, p: s.opened))
+    assert _numbers(same) == _numbers(base)
+    assert max(base["final_success"]) > 0  # it is a real comparison: the task was solved
+
+
+def test_a_declared_success_replaces_the_environments_for_the_root():
+    """A success that is never met keeps the root's level from ever reaching its threshold
+    (the environment's reward still trains it), and final_success is 0."""
+    env, params = make_keydoor()
+    never = _keydoor_h(env, success=lambda s, p: jnp.zeros((), jnp.float32))
+    res = run((env, params), SUCCESS_CFG, [0], progress=False, hierarchy=never)
+    root = res["levels"][0]
+    assert root["template"] == "open_door" and root["reached"] == [False]
+    assert root["episodes"][0] >= SUCCESS_CFG.max_episodes_per_level
+    assert res["final_success"] == [0.0]
+
+
+def test_a_bad_success_is_refused_with_a_clear_error():
+    env, params = make_keydoor()
+    with pytest.raises(HierarchyError, match="success must be a function"):
+        _keydoor_h(env, success=1.0)
+    vector = _keydoor_h(env, success=lambda s, p: jnp.stack([s.opened, s.has_key]))
+    with pytest.raises(HierarchyError, match=r"one scalar .* got shape \(2,\)"):
+        run((env, params), SUCCESS_CFG, [0], progress=False, hierarchy=vector)
+    broken = _keydoor_h(env, success=lambda s, p: s.no_such_field)
+    with pytest.raises(HierarchyError, match="fails on the environment's state.*no_such_field"):
+        run((env, params), SUCCESS_CFG, [0], progress=False, hierarchy=broken)
+    text = _keydoor_h(env, success=lambda s, p: {"a": s.opened, "b": s.opened})
+    with pytest.raises(HierarchyError, match="one scalar"):
+        run((env, params), SUCCESS_CFG, [0], progress=False, hierarchy=text)
+
+
+def test_declare_takes_templates_of_ones_own_and_success_is_in_the_identity():
+    env, _ = make_keydoor()
+    key = dataclasses.replace(env.templates()["give_key"], k_max=10)
+    h = _keydoor_h(env, templates=[key])
+    assert h.templates["give_key"] is key and h.templates["reach_door"] is not None
+    assert _keydoor_h(env, templates={"give_key": key}).templates["give_key"] is key
+    with pytest.raises(HierarchyError, match="registered as 'other'"):
+        _keydoor_h(env, templates={"other": key})
+    with pytest.raises(HierarchyError, match="OptionTemplates"):
+        _keydoor_h(env, templates=["give_key"])
+    assert "success" not in declared_identity(h)  # unchanged where none is declared
+
+    def door_open(s, p):
+        return s.opened
+
+    assert declared_identity(_keydoor_h(env, success=door_open))["success"].endswith("door_open")

@@ -56,7 +56,8 @@ class Environment(Generic[TEnvState, TEnvParams]):
 
     #: ``ENV/TASK`` name this instance was made for (set by the registry).
     name: str = "unnamed"
-    #: The task's per-episode success (``info["success"]``, else the episode return) always
+    #: The task's per-episode success (a hierarchy's declared ``success``, else
+    #: ``info["success"]``, else the episode return) always
     #: lies in [0, 1]. Lets the trainer stop a level's gate as soon as its outcome is
     #: certain; leave False where returns can leave [0, 1] (e.g. goal differences).
     success_in_unit_interval: bool = False
@@ -106,7 +107,9 @@ class Environment(Generic[TEnvState, TEnvParams]):
         return {}
 
     def hierarchies(self) -> dict:
-        """Named hierarchies (``smjax.options.Hierarchy``) over ``templates()``."""
+        """Named hierarchies (``smjax.options.Hierarchy``) over ``templates()``, the default
+        first (a run that names none trains the first); ``"flat"``, where given, is the one
+        the flat method trains."""
         return {}
 
     @property

@@ -10,12 +10,19 @@ Indices used by the compiled machinery:
 
 * options: 0 is the root, ``1..T`` the templates in top-down (breadth-first) order;
 * actions: ``0..P-1`` the primitive actions, ``P + j - 1`` a call of template ``j``.
+
+The root's success (what the trainer's threshold and ``final_success`` measure) is, in
+this order: the hierarchy's declared ``success(state, params)`` evaluated on the state an
+episode ends in, the environment's ``info["success"]`` where it reports one, else the
+episode's return.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from smjax.options.template import OptionTemplate
@@ -33,6 +40,10 @@ class Hierarchy:
     children: Mapping[str, Sequence[str]]
     templates: Mapping[str, OptionTemplate]
     primitive_names: tuple[str, ...] = ()
+    #: The task's success of an episode, from the state it ends in: pure and jittable,
+    #: ``success(state, params)`` -> a scalar float in [0, 1] or a bool (None: the
+    #: environment's ``info["success"]``, else the episode return).
+    success: Callable[[Any, Any], Any] | None = None
     # derived on construction
     option_names: tuple[str, ...] = field(init=False)
     depth_of: Mapping[str, int] = field(init=False)
@@ -46,6 +57,11 @@ class Hierarchy:
         if self.task in self.templates:
             raise HierarchyError(
                 f"task {self.task!r} is also a template name; the root option needs its own name"
+            )
+        if self.success is not None and not callable(self.success):
+            raise HierarchyError(
+                f"success must be a function success(state, params) -> float in [0, 1] or "
+                f"bool, got {type(self.success).__name__}"
             )
         if self.task not in self.children:
             raise HierarchyError(
@@ -198,11 +214,53 @@ class Hierarchy:
         return "\n".join(lines)
 
 
-def declare(env, task: str, children: Mapping[str, Sequence[str]]) -> Hierarchy:
-    """Build a validated hierarchy over an environment's templates and primitive actions."""
+def declare(env, task: str, children: Mapping[str, Sequence[str]], *,
+            templates: Mapping[str, OptionTemplate] | Sequence[OptionTemplate] | None = None,
+            success: Callable[[Any, Any], Any] | None = None) -> Hierarchy:
+    """Build a validated hierarchy over an environment's templates and primitive actions.
+
+    ``templates``: templates of your own (a name -> template mapping or a list), added to
+    the environment's (one with the name of an environment template replaces it).
+    ``success(state, params)``: the task's success of an episode ending in ``state`` (a
+    float in [0, 1] or a bool), where it is not the environment's ``info["success"]`` or
+    the episode return."""
+    own = dict(env.templates())
+    if templates is not None:
+        items = templates.values() if isinstance(templates, Mapping) else templates
+        for tpl in items:
+            if not isinstance(tpl, OptionTemplate):
+                raise HierarchyError(f"templates must be OptionTemplates, got {type(tpl).__name__}")
+            own[tpl.name] = tpl
+        if isinstance(templates, Mapping):
+            bad = [k for k, t in templates.items() if k != t.name]
+            if bad:
+                raise HierarchyError(f"template registered as {bad[0]!r} is named "
+                                     f"{templates[bad[0]].name!r}")
     return Hierarchy(
         task=task,
         children=dict(children),
-        templates=dict(env.templates()),
+        templates=own,
         primitive_names=tuple(env.primitive_action_names),
+        success=success,
     )
+
+
+def check_success(h: Hierarchy, env, env_params) -> None:
+    """Raise ``HierarchyError`` unless ``h.success`` (if declared) maps one of ``env``'s
+    states to a numeric or bool scalar (checked on shapes only: nothing runs)."""
+    if h.success is None:
+        return
+    try:
+        state = jax.eval_shape(lambda k: env.reset_env(k, env_params)[1], jax.random.PRNGKey(0))
+        out = jax.eval_shape(lambda s: h.success(s, env_params), state)
+    except Exception as err:  # the user's function, traced on the environment's state
+        raise HierarchyError(f"success(state, params) of hierarchy {h.task!r} fails on the "
+                             f"environment's state: {type(err).__name__}: {err}") from err
+    leaves = jax.tree.leaves(out)
+    ok = (len(leaves) == 1 and hasattr(leaves[0], "shape") and leaves[0].shape in ((), (1,))
+          and (jnp.issubdtype(leaves[0].dtype, jnp.number) or leaves[0].dtype == jnp.bool_))
+    if not ok:
+        got = (f"shape {leaves[0].shape}, dtype {leaves[0].dtype}"
+               if len(leaves) == 1 and hasattr(leaves[0], "shape") else repr(out))
+        raise HierarchyError(f"success(state, params) of hierarchy {h.task!r} must return one "
+                             f"scalar (a float in [0, 1] or a bool) per state, got {got}")

@@ -27,7 +27,7 @@ from flax import struct
 
 from smjax.core.env import select_tree
 from smjax.core.transition import ActOutput, Transition, no_pending
-from smjax.options.hierarchy import Hierarchy
+from smjax.options.hierarchy import Hierarchy, check_success
 from smjax.options.template import Parametric
 from smjax.options.stack import (
     ExecutionStack, stack_contains, stack_init, stack_push, stack_tick, stack_top, stack_truncate,
@@ -150,6 +150,7 @@ class HierarchyRunner:
         if frozen_policy not in ("greedy", "sample"):
             raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {frozen_policy!r}")
         self.env, self.env_params, self.h, self.agent = env, env_params, hierarchy, agent
+        check_success(hierarchy, env, env_params)
         self.gamma = float(gamma)
         self.frozen_policy = frozen_policy
         if not frozen_temperature > 0:
@@ -391,10 +392,9 @@ class HierarchyRunner:
             discount=discount, done=learner_done,
         )
         # Success of a finished episode: the template's F_o (its return) for a template
-        # learner; for the root, the environment's info["success"] where it reports one
-        # (e.g. Fetch's fraction of blocks placed), else the episode return.
-        if "success" in info:
-            task_success = jnp.asarray(info["success"], jnp.float32)
+        # learner; for the root, the task's success (task_success), else the episode return.
+        task_success = self.task_success(state, info)
+        if task_success is not None:
             success = jnp.where(is_root, task_success, ep_return)
         else:
             task_success, success = task_return, ep_return
@@ -407,6 +407,18 @@ class HierarchyRunner:
             task_end=task_end, task_success=jnp.where(task_end, task_success, 0.0),
         )
         return new_carry, transition, ends
+
+    def task_success(self, state, info: dict) -> jax.Array | None:
+        """[B] float: the root's success of episodes ending in ``state`` (batched): the
+        hierarchy's declared ``success(state, params)``, else the environment's
+        ``info["success"]`` (e.g. Fetch's fraction of blocks placed); None where neither
+        exists (the episode return is the success then)."""
+        if self.h.success is not None:
+            value = jax.vmap(self.h.success, (0, None))(state, self.env_params)
+            return jnp.asarray(value, jnp.float32).reshape(-1)  # scalar or [1] per state
+        if "success" in info:
+            return jnp.asarray(info["success"], jnp.float32)
+        return None
 
     def _side_cost_shaping(self, before, after, discount, learner_on, learner_idx, is_root,
                            controls: Controls):

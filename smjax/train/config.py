@@ -29,7 +29,7 @@ class TrainConfig:
         order: sub-skills first from reset states), or flat (one learner, no hierarchy).
       algo: learner for every level: ppo, dqn or actor-critic (the paper's).
       hierarchy: name from ``env.hierarchies()``; None picks the environment's default
-        ("paper" where it exists). Ignored by ``flat`` (which uses "flat").
+        (the first of its catalogue). Ignored by ``flat`` (which uses "flat").
       num_envs: parallel environments per seed.
       rollout_ticks: ticks per rollout (one learner update per rollout).
       updates_per_chunk: rollouts per compiled chunk (the host checks progress between chunks).

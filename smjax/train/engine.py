@@ -91,6 +91,12 @@ class Engine:
         self._warm = jax.jit(jax.vmap(agent.warm_start))
         self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
 
+    @property
+    def success_bounded(self) -> bool:
+        """The root's success lies in [0, 1]: the environment says so, or the hierarchy
+        declares its success (documented to be a float in [0, 1] or a bool)."""
+        return bool(self.env.success_in_unit_interval or self.h.success is not None)
+
     # ---- state -----------------------------------------------------------------
     def init_learner(self, keys: jax.Array):
         """Fresh learner states for each seed (leading axis S).
@@ -229,7 +235,7 @@ class Engine:
         if policy not in EVAL_TEMPERATURES:
             raise ValueError(f"policy must be one of {tuple(EVAL_TEMPERATURES)}, got {policy!r}")
         due = [True] * S if due is None else due
-        bounded = threshold is not None and self.env.success_in_unit_interval
+        bounded = threshold is not None and self.success_bounded
         per_seed = place((jnp.full((S,), NO_OPTION, jnp.int32), jnp.zeros((S,), jnp.int32),
                           ~jnp.asarray(due, bool), _decide([threshold if bounded else None] * S)))
         flags = place((jnp.asarray(False), jnp.asarray(EVAL_TEMPERATURES[policy], jnp.float32),
@@ -245,7 +251,7 @@ class Engine:
         (``keys``: per seed, varied between attempts by the caller; a seed not ``due`` is
         skipped); a seed's episodes stop once passing its threshold or not is certain."""
         # a template's success is its F_o (0 or 1); the root's is the task's
-        bounded = [o != 0 or self.env.success_in_unit_interval for o in learners]
+        bounded = [o != 0 or self.success_bounded for o in learners]
         decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
         per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
                           ~jnp.asarray(due, bool), decide))

@@ -53,7 +53,8 @@ class LevelPlan:
 def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
                       ) -> tuple[str, Hierarchy]:
     """The hierarchy a run uses: ``given`` (one declared by the caller, named
-    ``declared:<task>``), else "flat" for the flat method, else the named or default one."""
+    ``declared:<task>``), else "flat" for the flat method, else the named one, else the
+    environment's default: the first of its catalogue (``env.hierarchies()``)."""
     if given is not None:
         if not isinstance(given, Hierarchy):
             raise ConfigError(f"hierarchy must be a name or a smjax.options.Hierarchy (e.g. from "
@@ -67,7 +68,7 @@ def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
         raise ValueError(f"environment {env.name!r} declares no hierarchies")
     name = "flat" if cfg.method == "flat" else cfg.hierarchy
     if name is None:
-        name = "paper" if "paper" in options else next(iter(options))
+        name = next(iter(options))
     if name not in options:
         raise ValueError(
             f"unknown hierarchy {name!r} for {env.name!r}; valid: {', '.join(options)}")
@@ -77,8 +78,11 @@ def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
 def declared_identity(h: Hierarchy) -> dict:
     """What a resume must find again of a declared hierarchy (its shape and template names;
     the templates' functions cannot be compared)."""
-    return {"task": h.task, "children": {k: list(v) for k, v in h.children.items()},
-            "templates": sorted(h.templates)}
+    identity = {"task": h.task, "children": {k: list(v) for k, v in h.children.items()},
+                "templates": sorted(h.templates)}
+    if h.success is not None:  # only where declared, so older checkpoints still resume
+        identity["success"] = getattr(h.success, "__qualname__", type(h.success).__name__)
+    return identity
 
 
 def plan_levels(h: Hierarchy, method: str) -> list[LevelPlan]:
