@@ -119,16 +119,20 @@ K_MAX = jnp.asarray([10 ** 6, 5, 5, 3], jnp.int32)
 
 
 def test_pop_ends_the_lowest_stopped_level_and_everything_above():
-    stack = batch(stack_of(0, 1, 2), stack_of(0, 1, 2))
-    stop = jnp.asarray([[False, True, False, False], [False, False, False, False]])
+    stack = batch(stack_of(0, 1, 2), stack_of(0, 1, 2), stack_of(0, 1, 2))
+    stop = jnp.asarray([[False, True, False, False], [False, False, False, False],
+                        [False, False, True, False]])
     popped = phases.pop(stack, stop, K_MAX, jnp.asarray(2))
-    chex.assert_shape(popped.first_end, (2,))
-    np.testing.assert_array_equal(np.asarray(popped.stack.depth), [1, 3])
-    np.testing.assert_array_equal(np.asarray(popped.stack.option), [[0, -1, -1, -1], [0, 1, 2, -1]])
-    np.testing.assert_array_equal(np.asarray(popped.stack.steps), [[1, 0, 0, 0], [1, 1, 1, 0]])
-    np.testing.assert_array_equal(np.asarray(popped.first_end), [1, D])
-    np.testing.assert_array_equal(np.asarray(popped.learner_on), [True, True])
-    np.testing.assert_array_equal(np.asarray(popped.learner_ended), [True, False])
+    chex.assert_shape(popped.first_end, (3,))
+    np.testing.assert_array_equal(np.asarray(popped.stack.depth), [1, 3, 2])
+    np.testing.assert_array_equal(np.asarray(popped.stack.option),
+                                  [[0, -1, -1, -1], [0, 1, 2, -1], [0, 1, -1, -1]])
+    np.testing.assert_array_equal(np.asarray(popped.stack.steps),
+                                  [[1, 0, 0, 0], [1, 1, 1, 0], [1, 1, 0, 0]])
+    np.testing.assert_array_equal(np.asarray(popped.first_end), [1, D, 2])
+    np.testing.assert_array_equal(np.asarray(popped.learner_on), [True, True, True])
+    # the learner (option 2) ends with its caller (row 0) and by itself (row 2)
+    np.testing.assert_array_equal(np.asarray(popped.learner_ended), [True, False, True])
 
 
 def test_pop_ends_a_level_out_of_ticks_and_keeps_its_caller():
@@ -147,11 +151,11 @@ def test_a_satisfied_option_that_is_not_on_the_stack_pops_nothing():
 @settings(max_examples=30, deadline=None)
 @given(options=st.lists(st.integers(1, O - 1), min_size=0, max_size=D - 1),
        steps=st.lists(st.integers(0, 6), min_size=D, max_size=D),
-       stop=st.lists(st.booleans(), min_size=O, max_size=O))
-def test_pop_invariants(options, steps, stop):
+       stop=st.lists(st.booleans(), min_size=O, max_size=O), learner=st.integers(-1, O - 1))
+def test_pop_invariants(options, steps, stop, learner):
     depth = len(options) + 1
     stack = stack_of(0, *options, steps=steps[:depth])
-    popped = phases.pop(batch(stack), jnp.asarray([stop]), K_MAX, jnp.asarray(NO_OPTION))
+    popped = phases.pop(batch(stack), jnp.asarray([stop]), K_MAX, jnp.asarray(learner))
     out = jax.tree.map(lambda x: np.asarray(x[0]), popped.stack)
     ids = [0] + options
     ends = [stop[o] or steps[i] + 1 >= int(K_MAX[o]) for i, o in enumerate(ids)]
@@ -160,6 +164,10 @@ def test_pop_invariants(options, steps, stop):
     np.testing.assert_array_equal(out.option[:expected], ids[:expected])
     np.testing.assert_array_equal(out.steps[:expected], np.asarray(steps[:expected]) + 1)
     assert (out.option[expected:] == EMPTY).all() and (out.steps[expected:] == 0).all()
+    # the learner's run ends where its own entry (its lowest, if called twice) or one below ends
+    on = learner in ids
+    assert bool(popped.learner_on[0]) == on
+    assert bool(popped.learner_ended[0]) == (on and expected <= ids.index(learner))
 
 
 # ---- account ------------------------------------------------------------------------
