@@ -46,7 +46,6 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     first episodes; a gain counts for the option on top of the stack when the tick starts,
     so a call's first step counts for its caller; an episode's last step is not seen)."""
     runner = engine.episode_runner
-    dummy = engine.agent.init(jax.random.key(0), engine.example_obs, engine.num_actions)
     O = engine.h.num_options
 
     def one_seed(key, bank, learned, temperature):
@@ -63,7 +62,7 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             carry, key, done, ret, success, length, t, gains = c
             key, k = jax.random.split(key)
             before, top = _inventory(carry.env_state), jax.vmap(stack_top)(carry.stack)
-            carry, _, ends = runner.tick(carry, k, dummy, bank, controls)
+            carry, _, ends = runner.tick(carry, k, None, bank, controls)  # nobody learns
             if before is not None:
                 counted = (~ends.reset & ~done)[:, None]
                 gain = jnp.where(counted, jnp.maximum(_inventory(carry.env_state) - before, 0), 0)

@@ -109,6 +109,10 @@ def test_evaluation_and_gate_share_one_compiled_program():
     result, second = engine.evaluate(keys, bank, learned, state.learner)
     assert first > 0 and second == 0.0 and len(engine._compiled_episodes) == 1
     assert np.asarray(result["completed"]).shape == (3,)
+    # evaluation needs no learner state: the same program and the same numbers without one
+    alone, third = engine.evaluate(keys, bank, learned)
+    assert third == 0.0 and len(engine._compiled_episodes) == 1
+    jax.tree.map(np.testing.assert_array_equal, alone, result)
 
 
 _TWICE = """

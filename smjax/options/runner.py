@@ -12,131 +12,30 @@ Only the learner's own choices become training transitions (``decision``); its r
 is the environment's reward when it is the root option, else ``satisfied`` of its
 template (F_o); the per-tick discount is gamma, or gamma**d for a teleported call; the
 learner's episode (``done``) ends with the environment's or when its option ends.
-The machinery is generic: it sees the environment only through ``reset_env``,
+The tick is a string of pure phases (``smjax.options.phases``: decide, realise, step,
+pop, account). The machinery is generic: it sees the environment only through ``reset_env``,
 ``step_env`` and the templates of a :class:`~smjax.options.Hierarchy`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
-
 import jax
 import jax.numpy as jnp
 import numpy as np
-from flax import struct
 
 from smjax.core.env import select_tree
 from smjax.core.transition import ActOutput, Transition, no_pending
-from smjax.options.hierarchy import Hierarchy, check_success
-from smjax.options.template import Parametric
-from smjax.options.stack import (
-    ExecutionStack, stack_contains, stack_init, stack_push, stack_tick, stack_top, stack_truncate,
+from smjax.options import phases
+from smjax.options.carry import (  # noqa: F401 - re-exported: the runner's public types
+    NO_OPTION, Controls, EnvCarry, EpisodeEnds, ResetPool, TickStats,
 )
+from smjax.options.hierarchy import Hierarchy, check_success
+from smjax.options.realise import families, primitive_action, run_family
+from smjax.options.stack import stack_init
 
-NO_OPTION = -1
 # how the tick evaluates the policy bank: only the learned options that can decide (a loop
 # over them), every option at once (one batched apply), or by the backend (auto)
 FROZEN_EVALS = ("auto", "learned", "all")
 _NEVER = np.iinfo(np.int32).max // 2
-
-
-@struct.dataclass
-class EnvCarry:
-    """Per-environment rollout state (leading axis B)."""
-
-    env_state: Any
-    obs: jax.Array
-    stack: ExecutionStack
-    learner_started: jax.Array  # bool: the learner has acted in this episode
-    learner_return: jax.Array   # float: learner reward collected in this episode
-    task_return: jax.Array      # float: environment reward collected in this episode
-    pending: Transition         # the learner's decision still running at the last rollout end
-    pool: "ResetPool | None" = None  # pre-generated episode starts (None: reset in every tick)
-
-
-@struct.dataclass
-class ResetPool:
-    """Episode starts generated ahead of time (leading axis P), handed out in order.
-
-    Generating a fresh episode start for every environment in every tick (and throwing
-    it away wherever the episode goes on) costs as much as the step itself in worlds
-    with procedural generation; instead ``refill`` generates P starts once (the engine
-    does it before every rollout) and each reset takes the next unused one, so within
-    a rollout every episode gets its own fresh start unless more than P episodes end
-    (then starts are reused, oldest first).
-    """
-
-    obs: jax.Array
-    state: Any
-    next: jax.Array  # int32: index of the next start to hand out (mod P)
-
-
-@struct.dataclass
-class EpisodeEnds:
-    """Per-environment episode bookkeeping of one tick (leading axis B)."""
-
-    reset: jax.Array     # bool: the environment was reset after this tick (every reset counts)
-    finished: jax.Array  # bool: an episode in which the learner acted ended
-    ret: jax.Array       # float: that episode's learner return (0 where not finished)
-    success: jax.Array   # float: that episode's success (0 where not finished)
-    decided: jax.Array   # bool: the learner decided in this tick
-    task_end: jax.Array  # bool: a whole-task episode (root at the bottom) ended naturally
-    task_success: jax.Array  # float: that episode's task success (0 where not ended)
-
-
-@struct.dataclass
-class TickStats:
-    """Sums over the batch (and over ticks once reduced)."""
-
-    env_episodes: jax.Array
-    learner_episodes: jax.Array
-    learner_return: jax.Array
-    learner_success: jax.Array
-    learner_decisions: jax.Array
-    task_episodes: jax.Array
-    task_success: jax.Array
-
-    @staticmethod
-    def of(ends: EpisodeEnds) -> "TickStats":
-        return TickStats(
-            env_episodes=ends.reset.sum(-1).astype(jnp.int32),
-            learner_episodes=ends.finished.sum(-1).astype(jnp.int32),
-            learner_return=ends.ret.sum(-1),
-            learner_success=ends.success.sum(-1),
-            learner_decisions=ends.decided.sum(-1).astype(jnp.int32),
-            task_episodes=ends.task_end.sum(-1).astype(jnp.int32),
-            task_success=ends.task_success.sum(-1),
-        )
-
-
-@dataclass(frozen=True)
-class Controls:
-    """Traced per-run controls of the tick (all arrays, so one compile serves every level).
-
-    learner: option id being trained (NO_OPTION: evaluation, nobody learns).
-    start: option placed at the bottom of the stack at each reset (0 = root; a template
-      id starts that template directly from reset states, as bottom-up training does).
-    learned: bool [num_options], options whose frozen policy is in the bank.
-    teleport: bool, unlearned templates may be teleported (None: as the runner was built;
-      False turns a teleporting runner into an evaluating one without another compile).
-    continue_episodes: bool, the environment goes on when the learner's option ends (None:
-      as the runner was built); its next episode starts where the levels above call it again.
-    temperature: float, how frozen policies pick: 0 greedy (argmax), else a sample at this
-      temperature (None: as the runner was built).
-    side_cost: float weight (or bool), a template learner is also rewarded by this times the
-      decrease of its template's ``side_cost`` (None or 0: never; fine-tuning turns it on).
-    gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs
-      with different discounts share one compile (a sweep).
-    """
-
-    learner: jax.Array
-    start: jax.Array
-    learned: jax.Array
-    teleport: jax.Array | None = None
-    continue_episodes: jax.Array | None = None
-    temperature: jax.Array | None = None
-    side_cost: jax.Array | None = None
-    gamma: jax.Array | None = None
 
 
 class HierarchyRunner:
@@ -181,8 +80,8 @@ class HierarchyRunner:
         space = env.action_space(env_params)
         self.action_shape = tuple(space.shape)
         self.action_dtype = space.dtype
-        self.teleport_families = _families([t.teleport for t in tpls])
-        self.controller_families = _families([t.controller for t in tpls])
+        self.teleport_families = families([t.teleport for t in tpls])
+        self.controller_families = families([t.controller for t in tpls])
 
     # ---- per-environment template evaluations (unbatched) ------------------
     def _per_option(self, state, field: str, root, dtype) -> jax.Array:
@@ -260,52 +159,62 @@ class HierarchyRunner:
         obs, state = take(pool.obs), jax.tree.map(take, pool.state)
         return obs, state, pool.replace(next=(pool.next + reset.sum()) % self.reset_pool)
 
-    # ---- the decision cascade (unbatched) -------------------------------------
-    def _decide(self, stack, frozen_choice, learner_choice, controls: Controls, callable_):
-        """Walk down from the stack top until a primitive step is fixed."""
-        decided = jnp.asarray(False)
-        learner_decided = jnp.asarray(False)
-        primitive = jnp.asarray(0, jnp.int32)
-        teleported = jnp.asarray(NO_OPTION, jnp.int32)
-        scripted = jnp.asarray(NO_OPTION, jnp.int32)
-        # A called template is pushed if it is learned, is the learner, or plays a scripted
-        # controller (when it is not teleported instead); otherwise it is teleported.
-        scripted_ok = jnp.asarray(self.has_controller) & ~(
-            jnp.asarray(self.has_teleport) & self.teleports_on(controls))
-        pushable = (controls.learned | (jnp.arange(self.h.num_options) == controls.learner)
-                    | scripted_ok)
-        for _ in range(self.D):
-            top = jnp.maximum(stack_top(stack), 0)
-            is_learner = top == controls.learner
-            is_scripted = ~is_learner & ~controls.learned[top]
-            choice = jnp.where(is_learner, learner_choice, frozen_choice[top])
-            open_ = ~decided
-            run_script = open_ & is_scripted
-            chooses = open_ & ~is_scripted
-            learner_decided = learner_decided | (chooses & is_learner)
-            is_prim = choice < self.P
-            tpl = jnp.clip(choice - self.P + 1, 0, self.h.num_options - 1)
-            push = chooses & ~is_prim & pushable[tpl] & callable_[tpl]
-            teleport = chooses & ~is_prim & ~push
-            take_prim = chooses & is_prim
-            scripted = jnp.where(run_script, top, scripted)
-            primitive = jnp.where(take_prim, choice, primitive)
-            teleported = jnp.where(teleport, tpl, teleported)
-            decided = decided | run_script | take_prim | teleport
-            stack = stack_push(stack, tpl, push)
-        return stack, primitive, teleported, scripted, learner_decided
-
-    # ---- one tick for the whole batch ------------------------------------------
+    # ---- one tick for the whole batch: decide, realise, step, pop, account -------------
     def tick(self, carry: EnvCarry, key: jax.Array, learner_state, bank_params,
              controls: Controls) -> tuple[EnvCarry, Transition, EpisodeEnds]:
-        B = carry.obs.shape[0]
+        """One primitive step for every environment (leading axis B).
+
+        ``learner_state`` is what the agent's ``act`` takes; in ``learner_acts_frozen`` mode
+        only its ``params`` are read, and it may be None where nobody learns
+        (``controls.learner`` is NO_OPTION: evaluation needs no learner).
+        """
         k_act, k_frozen, k_ctrl, k_tp, k_step, k_reset = jax.random.split(key, 6)
         teleport_on = self.teleports_on(controls)
         callable_ = self.callable_options(controls.learned, controls.learner, teleport_on)
+        act, learner_mask, frozen = self._choices(carry, learner_state, bank_params, controls,
+                                                  callable_, k_act, k_frozen)
+        pushable = phases.pushable_options(
+            controls.learned, controls.learner, jnp.asarray(self.has_controller),
+            jnp.asarray(self.has_teleport), teleport_on)
+        decision = jax.vmap(lambda s, f, l: phases.decide(
+            s, f, l, learner=controls.learner, learned=controls.learned, pushable=pushable,
+            callable_=callable_, num_primitives=self.P))(carry.stack, frozen, act.action)
+        state_in, action, teleported = self._realise(decision, carry.env_state, teleport_on,
+                                                      k_ctrl, k_tp)
+        obs, state, reward, terminated, truncated, info = phases.step(
+            self.env, self.env_params, k_step, state_in, action)
+        sat, stop = self._stop(state)
+        popped = phases.pop(decision.stack, stop, self.k_max, controls.learner)
+
+        gamma = self.gamma if controls.gamma is None else controls.gamma
+        discount = phases.tick_discount(teleported, self.nominal, gamma)
+        learner_idx = jnp.maximum(controls.learner, 0)
+        shaping = self._side_cost_shaping(carry.env_state, state, discount, popped.learner_on,
+                                          learner_idx, controls.learner <= 0, controls)
+        acc = phases.account(
+            started=carry.learner_started, learner_return=carry.learner_return,
+            task_return=carry.task_return, decided=decision.learner_decided, reward=reward,
+            env_done=terminated | truncated, popped=popped,
+            learner_satisfied=sat[:, learner_idx], shaping=shaping,
+            info_success=self.task_success(state, info),
+            learner=controls.learner, start=controls.start,
+            reset_on_learner_end=self.resets_on_learner_end(controls))
+        transition = Transition(
+            obs=carry.obs, action=act.action, action_mask=learner_mask, log_prob=act.log_prob,
+            value=act.value, decision=decision.learner_decided, reward=acc.reward,
+            discount=discount, done=acc.learner_done,
+        )
+        return self._restart(carry, acc, popped.stack, obs, state, controls, k_reset), \
+            transition, acc.ends
+
+    def _choices(self, carry: EnvCarry, learner_state, bank_params, controls: Controls,
+                 callable_: jax.Array, k_act: jax.Array, k_frozen: jax.Array):
+        """What each policy would pick now: the learner's act [B] (and its action mask
+        [B, A]), and every frozen policy's masked pick [B, O] (read only where that option
+        is on the stack and learned)."""
         init_ok = jax.vmap(self._initiation)(carry.env_state)                     # [B, O]
         masks = jax.vmap(lambda i: self.action_masks(i, callable_))(init_ok)      # [B, O, A]
-        learner_idx = jnp.maximum(controls.learner, 0)
-        learner_mask = masks[:, learner_idx]                                      # [B, A]
+        learner_mask = masks[:, jnp.maximum(controls.learner, 0)]                 # [B, A]
         if self.learner_acts_frozen:
             act = self._act_frozen(learner_state, carry.obs, learner_mask, k_act, controls)
         else:
@@ -313,100 +222,46 @@ class HierarchyRunner:
         logits = self.frozen_logits(bank_params, carry.obs, controls)             # [O, B, A]
         logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
         frozen = self._frozen_pick(logits, k_frozen, controls)
-        frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)                     # [B, O]
+        return act, learner_mask, jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)
 
-        stack, primitive, teleported, scripted, decided = jax.vmap(
-            lambda s, f, l: self._decide(s, f, l, controls, callable_)
-        )(carry.stack, frozen, act.action)
-
-        action = jnp.broadcast_to(
-            primitive.reshape((B,) + (1,) * len(self.action_shape)), (B,) + self.action_shape
-        ).astype(self.action_dtype)
+    def _realise(self, decision: phases.Decision, env_state, teleport_on: jax.Array,
+                 k_ctrl: jax.Array, k_tp: jax.Array):
+        """(state to step from, action [B, ...], teleported [B]): the primitive, overwritten
+        by a scripted controller's action, or by a teleport's jump and action (teleports
+        only where this tick allows them)."""
+        action = primitive_action(decision.primitive, self.action_shape, self.action_dtype)
         if self.controller_families:
-            action = self._run_family(self.controller_families, k_ctrl, carry.env_state, scripted,
-                                      action, controls=True)
-
-        state_in = carry.env_state
+            action = self._run_family(self.controller_families, k_ctrl, env_state,
+                                      decision.scripted, action, controls=True)
+        teleported = decision.teleported
         if self.allow_teleport and self.teleport_families:
             teleported = jnp.where(teleport_on, teleported, NO_OPTION)
-            state_in, action = self._run_family(self.teleport_families, k_tp, state_in, teleported,
-                                                action, controls=False)
+            env_state, action = self._run_family(self.teleport_families, k_tp, env_state,
+                                                 teleported, action, controls=False)
+        return env_state, action, teleported
 
-        obs, state, reward, terminated, truncated, info = jax.vmap(
-            self.env.step_env, (0, 0, 0, None)
-        )(jax.random.split(k_step, B), state_in, action, self.env_params)
-
-        # pops: the lowest entry that is satisfied or out of ticks ends, with all above it
-        stack = jax.vmap(stack_tick)(stack)
-        sat = jax.vmap(self._satisfied)(state)                                   # [B, O]
-        stop = sat
+    def _stop(self, state) -> tuple[jax.Array, jax.Array]:
+        """(satisfied, satisfied or failed), both [B, O], in the stepped state."""
+        sat = jax.vmap(self._satisfied)(state)
         if any(t.failed is not None for t in self.templates):
-            stop = sat | jax.vmap(self._failed)(state)
-        opt = jnp.maximum(stack.option, 0)
-        live = jnp.arange(self.D)[None, :] < stack.depth[:, None]
-        ended = live & (jnp.take_along_axis(stop, opt, 1) | (stack.steps >= self.k_max[opt]))
-        first_end = jnp.where(ended.any(1), jnp.argmax(ended, 1), self.D)
-        learner_on = jax.vmap(stack_contains, (0, None))(stack, controls.learner)
-        learner_pos = jnp.argmax(stack.option == controls.learner, 1)
-        learner_ended = learner_on & (first_end <= learner_pos)
-        stack = jax.vmap(stack_truncate)(stack, first_end)
+            return sat, sat | jax.vmap(self._failed)(state)
+        return sat, sat
 
-        env_done = terminated | truncated
-        task_end = env_done | (first_end == 0)
-        reset = task_end | (learner_ended & self.resets_on_learner_end(controls))
-        is_root = controls.learner <= 0
-        learner_reward = jnp.where(
-            is_root, reward.astype(jnp.float32),
-            (learner_on & sat[:, learner_idx]).astype(jnp.float32),
-        )
-        tp_steps = jnp.where(teleported >= 0, self.nominal[jnp.maximum(teleported, 0)], 1.0)
-        gamma = self.gamma if controls.gamma is None else controls.gamma
-        discount = gamma ** tp_steps
-        shaping = self._side_cost_shaping(carry.env_state, state, discount, learner_on,
-                                          learner_idx, is_root, controls)
-        # In evaluation (no learner) the whole episode counts, with the environment's reward.
-        started = carry.learner_started | decided | (controls.learner < 0)
-        ep_return = carry.learner_return + jnp.where(started, learner_reward, 0.0)
-        task_return = carry.task_return + reward.astype(jnp.float32)
-        # The learner's episode is one run of its option: it ends with the environment's
-        # episode or when the option ends (the same tick unless episodes continue).
-        learner_done = reset | learner_ended
-        finished = learner_done & started
-
-        obs_re, state_re, pool = self._next_starts(carry, reset, k_reset)
+    def _restart(self, carry: EnvCarry, acc: phases.Accounts, stack, obs, state,
+                 controls: Controls, key: jax.Array) -> EnvCarry:
+        """The next tick's carry: where an episode ended, a new start with a fresh stack."""
+        B = carry.obs.shape[0]
+        obs_re, state_re, pool = self._next_starts(carry, acc.reset, key)
         fresh = jax.vmap(lambda _: stack_init(self.D, controls.start))(jnp.arange(B))
-        new_carry = EnvCarry(
-            env_state=jax.vmap(select_tree)(reset, state_re, state),
-            obs=jax.vmap(select_tree)(reset, obs_re, obs),
-            stack=jax.vmap(select_tree)(reset, fresh, stack),
-            learner_started=started & ~learner_done,
-            learner_return=jnp.where(learner_done, 0.0, ep_return),
-            task_return=jnp.where(reset, 0.0, task_return),
+        return EnvCarry(
+            env_state=jax.vmap(select_tree)(acc.reset, state_re, state),
+            obs=jax.vmap(select_tree)(acc.reset, obs_re, obs),
+            stack=jax.vmap(select_tree)(acc.reset, fresh, stack),
+            learner_started=acc.started, learner_return=acc.learner_return,
+            task_return=acc.task_return,
             pending=carry.pending,  # the engine updates it once per rollout (carry_pending)
             pool=pool,
         )
-        transition = Transition(
-            obs=carry.obs, action=act.action, action_mask=learner_mask, log_prob=act.log_prob,
-            value=act.value, decision=decided,
-            reward=jnp.where(started, learner_reward + shaping, 0.0),
-            discount=discount, done=learner_done,
-        )
-        # Success of a finished episode: the template's F_o (its return) for a template
-        # learner; for the root, the task's success (task_success), else the episode return.
-        task_success = self.task_success(state, info)
-        if task_success is not None:
-            success = jnp.where(is_root, task_success, ep_return)
-        else:
-            task_success, success = task_return, ep_return
-        # A whole-task episode counts where the root is at the bottom of the stack and the
-        # episode ended by itself (not cut because a learner's option ended).
-        task_end = task_end & (controls.start == 0)
-        ends = EpisodeEnds(
-            reset=reset, finished=finished, ret=jnp.where(finished, ep_return, 0.0),
-            success=jnp.where(finished, success, 0.0), decided=decided,
-            task_end=task_end, task_success=jnp.where(task_end, task_success, 0.0),
-        )
-        return new_carry, transition, ends
 
     def task_success(self, state, info: dict) -> jax.Array | None:
         """[B] float: the root's success of episodes ending in ``state`` (batched): the
@@ -435,13 +290,17 @@ class HierarchyRunner:
 
     def _act_frozen(self, learner_state, obs, mask, key, controls: Controls) -> ActOutput:
         """The learner picks as the bank will run it once frozen (the level's gate); with no
-        learner (evaluation) its network is not run at all."""
-        def own():
-            return self.agent.policy_logits(learner_state.params, obs)
+        learner (evaluation: ``controls.learner`` NO_OPTION, or no ``learner_state`` at all)
+        its network is not run."""
+        if learner_state is None:  # nobody learns: the learner's choice is never read
+            logits = jnp.zeros(mask.shape, jnp.float32)
+        else:
+            def own():
+                return self.agent.policy_logits(learner_state.params, obs)
 
-        shape = jax.eval_shape(own)
-        logits = jax.lax.cond(controls.learner >= 0, own,
-                              lambda: jnp.zeros(shape.shape, shape.dtype))
+            shape = jax.eval_shape(own)
+            logits = jax.lax.cond(controls.learner >= 0, own,
+                                  lambda: jnp.zeros(shape.shape, shape.dtype))
         action = self._frozen_pick(jnp.where(mask, logits, -1e9), key, controls).astype(jnp.int32)
         zeros = jnp.zeros(action.shape, jnp.float32)
         return ActOutput(action, zeros, zeros)
@@ -497,73 +356,7 @@ class HierarchyRunner:
         sample = jax.random.categorical(key, logits / jnp.maximum(temperature, 1e-6), -1)
         return jnp.where(temperature > 0, sample, jnp.argmax(logits, -1))
 
-    def _run_family(self, families, key, state, chosen, action, *, controls: bool):
-        """Realise the template ``chosen[b]`` (option id, -1 for none) of each environment.
-
-        One vmapped call per family: a family's data is gathered per environment for the
-        member it runs. Controllers return an action; teleports a (state, action) pair.
-        """
-        B = chosen.shape[0]
-        safe = jnp.maximum(chosen, 0)
-        for i, fam in enumerate(families):
-            keys = jax.random.split(jax.random.fold_in(key, i), B)
-            member = jnp.asarray(fam.member_of)[safe]
-            hit = (chosen >= 0) & jnp.asarray(fam.is_member)[safe]
-            data = jax.tree.map(lambda d: jnp.asarray(d)[member], fam.data)
-            out = jax.vmap(fam.fn, (0, 0, None, 0))(keys, state, self.env_params, data)
-            if controls:
-                new_action = out
-            else:
-                jumped, new_action = out
-                state = jax.vmap(select_tree)(hit, jumped, state)
-            new_action = jnp.asarray(new_action, self.action_dtype).reshape(action.shape)
-            action = jnp.where(hit.reshape((B,) + (1,) * (action.ndim - 1)), new_action, action)
-        return action if controls else (state, action)
-
-
-@dataclass(frozen=True)
-class _Family:
-    fn: Any
-    data: Any             # stacked member data, leading axis = member
-    member_of: np.ndarray  # [num_options] -> member index (0 where not a member)
-    is_member: np.ndarray  # [num_options] bool
-
-
-def _families(realisations) -> list[_Family]:
-    """Group templates' teleports (or controllers) into families sharing one function.
-
-    ``Parametric`` realisations with the same ``fn`` form one family; any other callable
-    is a family of one (with no data). Option ids are template index + 1 (0 is the root).
-    """
-    groups: dict[int, list] = {}
-    order: list[int] = []
-    for j, real in enumerate(realisations, start=1):
-        if real is None:
-            continue
-        fn = real.fn if isinstance(real, Parametric) else real
-        if id(fn) not in groups:
-            groups[id(fn)] = []
-            order.append(id(fn))
-        groups[id(fn)].append((j, real))
-    out = []
-    n = len(realisations) + 1
-    for gid in order:
-        members = groups[gid]
-        first = members[0][1]
-        member_of, is_member = np.zeros(n, np.int32), np.zeros(n, bool)
-        for m, (j, _) in enumerate(members):
-            member_of[j], is_member[j] = m, True
-        if isinstance(first, Parametric):
-            data = jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs]),
-                                *[r.data for _, r in members])
-            fn = first.fn
-        else:
-            data, fn = np.zeros((1,), np.int32), _drop_data(first)
-        out.append(_Family(fn, data, member_of, is_member))
-    return out
-
-
-def _drop_data(fn):
-    def call(key, state, params, _data):
-        return fn(key, state, params)
-    return call
+    def _run_family(self, fams, key, state, chosen, action, *, controls: bool):
+        """``realise.run_family`` with this runner's environment parameters."""
+        return run_family(fams, key, state, chosen, action, self.env_params, self.action_dtype,
+                          controls=controls)

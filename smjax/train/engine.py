@@ -48,6 +48,13 @@ class SeedState(NamedTuple):
     key: jax.Array
 
 
+class _FrozenLearner(NamedTuple):
+    """What the episodes program's runner reads of a learner (it acts as it will once
+    frozen): its params alone, so evaluation can pass any tree of their shape."""
+
+    params: Any
+
+
 def frozen_mode(cfg: TrainConfig, agent) -> str:
     """How frozen policies act: the config's choice, else what the learner declares."""
     return agent.frozen_policy if cfg.frozen_policy == "auto" else cfg.frozen_policy
@@ -89,6 +96,8 @@ class Engine:
         self._compiled_episodes: dict[tuple, Any] = {}
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         self._warm = jax.jit(jax.vmap(agent.warm_start))
+        # jitted, so it also slices a bank sharded over processes
+        self._bank_entry0 = jax.jit(lambda bank: jax.tree.map(lambda p: p[:, 0], bank))
         self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
 
     @property
@@ -164,7 +173,7 @@ class Engine:
         return new, stats, metrics
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
-    def _first_episodes(self, key, learner_state, bank, learned, learner, start, teleport,
+    def _first_episodes(self, key, learner_params, bank, learned, learner, start, teleport,
                         temperature, max_ticks, skip, decide, num_envs: int) -> dict:
         """Run ``num_envs`` environments until each has finished one learner episode (or
         ``max_ticks``); each environment's first episode counts, so short episodes are not
@@ -197,7 +206,8 @@ class Engine:
         def body(c):
             carry, key, done, ret, success, t = c
             key, k = jax.random.split(key)
-            carry, _, ends = runner.tick(carry, k, learner_state, bank, controls)
+            carry, _, ends = runner.tick(carry, k, _FrozenLearner(learner_params), bank,
+                                         controls)
             first = ends.finished & ~done
             ret = jnp.where(first, ends.ret, ret)
             success = jnp.where(first, ends.success, success)
@@ -220,7 +230,7 @@ class Engine:
             compile_s = time.perf_counter() - t0
         return self._compiled_episodes[sig](*args), compile_s
 
-    def evaluate(self, keys, bank, learned, learner_state, place=_same, *,
+    def evaluate(self, keys, bank, learned, learner_state=None, place=_same, *,
                  policy: str | None = None, due: list[bool] | None = None,
                  threshold: float | None = None) -> tuple[dict, float]:
         """The trained hierarchy alone (root on the stack, no teleports, nobody learning),
@@ -229,7 +239,8 @@ class Engine:
         are skipped, their results meaningless). ``threshold``: stop a seed's episodes once
         reaching it or not is certain (a gate; needs task successes in [0, 1]). ``place``
         puts the small per-call inputs where the caller's mesh needs them (every input
-        must be global across processes)."""
+        must be global across processes). ``learner_state`` is not needed (nobody learns in
+        evaluation); where given, only its params are passed (they are never run)."""
         S = keys.shape[0]
         policy = self.frozen_policy if policy is None else policy
         if policy not in EVAL_TEMPERATURES:
@@ -241,7 +252,10 @@ class Engine:
         flags = place((jnp.asarray(False), jnp.asarray(EVAL_TEMPERATURES[policy], jnp.float32),
                        jnp.asarray(self.cfg.eval_max_ticks)))
         learner, start, skip, decide = per_seed
-        args = (keys, learner_state, bank, learned, learner, start) + flags + (skip, decide)
+        # the program (shared with the gate) takes learner params; with none, option 0's
+        # bank entry has their shapes (the bank is built from the learners' params)
+        params = self._bank_entry0(bank) if learner_state is None else learner_state.params
+        args = (keys, params, bank, learned, learner, start) + flags + (skip, decide)
         return self._run_episodes(args, self.cfg.eval_envs)
 
     def gate(self, keys, state: SeedState, bank, learned, learners: list[int],
@@ -259,5 +273,5 @@ class Engine:
         flags = place((jnp.asarray(True), jnp.asarray(temperature, jnp.float32),
                        jnp.asarray(self.cfg.gate_max_ticks)))
         learner, start, skip, decide = per_seed
-        args = (keys, state.learner, bank, learned, learner, start) + flags + (skip, decide)
+        args = (keys, state.learner.params, bank, learned, learner, start) + flags + (skip, decide)
         return self._run_episodes(args, self.cfg.gate_envs)

@@ -145,7 +145,7 @@ class FinetunePhase:
         keys = fold_in(self.arrays["keys"], jnp.asarray(host["chunks"], jnp.uint32))
         bank, learned = self._candidate_bank(due)
         result, compile_s = self.engine.evaluate(
-            keys, bank, learned, self.arrays["state"].learner, place=self._place_small,
+            keys, bank, learned, place=self._place_small,
             due=[s in due for s in range(S)], threshold=cfg.finetune_threshold)
         host["compile_seconds"] += compile_s
         result = dist.gather(result)
@@ -192,7 +192,7 @@ class FinetunePhase:
         # a fold no gate uses (gates fold in the chunk count)
         keys = fold_in(self.arrays["keys"], jnp.asarray(np.iinfo(np.uint32).max, jnp.uint32))
         result, compile_s = self.engine.evaluate(
-            keys, self.arrays["bank"], self.arrays["learned"], self.arrays["state"].learner,
+            keys, self.arrays["bank"], self.arrays["learned"],
             place=self._place_small, due=[s in seeds for s in range(S)])
         self.host["compile_seconds"] += compile_s
         result = dist.gather(result)

@@ -328,7 +328,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         for policy in [self.engine.frozen_policy] + [
                 p for p in EVAL_TEMPERATURES if p != self.engine.frozen_policy]:
             result, compile_s = self.engine.evaluate(
-                k_eval, self.arrays["bank"], self.arrays["learned"], self.arrays["state"].learner,
+                k_eval, self.arrays["bank"], self.arrays["learned"],
                 place=self._place_small, policy=policy)
             self.host["compile_seconds"] += compile_s
             by_policy[policy] = dist.gather(result)

@@ -65,10 +65,9 @@ def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 5
     runner = engine.episode_runner
     controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False))
     key = jax.random.PRNGKey(0) if key is None else key
-    key, k_reset, k_init = jax.random.split(key, 3)
+    key, k_reset, _ = jax.random.split(key, 3)  # (the third key once made a dummy learner)
     carry = runner.reset(k_reset, controls, 1)
-    dummy = engine.agent.init(k_init, engine.example_obs, engine.num_actions)
-    tick = jax.jit(lambda c, k: runner.tick(c, k, dummy, bank, controls))
+    tick = jax.jit(lambda c, k: runner.tick(c, k, None, bank, controls))  # nobody learns
     states, total = [jax.tree.map(lambda x: x[0], carry.env_state)], 0.0
     for _ in range(max_ticks):
         key, k = jax.random.split(key)

@@ -1,0 +1,119 @@
+"""The data the hierarchical tick carries and reports: per-environment rollout state
+(``EnvCarry``, ``ResetPool``), per-tick episode bookkeeping (``EpisodeEnds``, summed to
+``TickStats``) and the traced per-run switches (``Controls``).
+
+They live apart from the runner so that the tick's phases (``smjax.options.phases``) and
+the runner that strings them together both import them one way.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from smjax.core.transition import Transition
+from smjax.options.stack import ExecutionStack
+
+NO_OPTION = -1
+
+
+@struct.dataclass
+class EnvCarry:
+    """Per-environment rollout state (leading axis B)."""
+
+    env_state: Any
+    obs: jax.Array
+    stack: ExecutionStack
+    learner_started: jax.Array  # bool: the learner has acted in this episode
+    learner_return: jax.Array   # float: learner reward collected in this episode
+    task_return: jax.Array      # float: environment reward collected in this episode
+    pending: Transition         # the learner's decision still running at the last rollout end
+    pool: "ResetPool | None" = None  # pre-generated episode starts (None: reset in every tick)
+
+
+@struct.dataclass
+class ResetPool:
+    """Episode starts generated ahead of time (leading axis P), handed out in order.
+
+    Generating a fresh episode start for every environment in every tick (and throwing
+    it away wherever the episode goes on) costs as much as the step itself in worlds
+    with procedural generation; instead ``refill`` generates P starts once (the engine
+    does it before every rollout) and each reset takes the next unused one, so within
+    a rollout every episode gets its own fresh start unless more than P episodes end
+    (then starts are reused, oldest first).
+    """
+
+    obs: jax.Array
+    state: Any
+    next: jax.Array  # int32: index of the next start to hand out (mod P)
+
+
+@struct.dataclass
+class EpisodeEnds:
+    """Per-environment episode bookkeeping of one tick (leading axis B)."""
+
+    reset: jax.Array     # bool: the environment was reset after this tick (every reset counts)
+    finished: jax.Array  # bool: an episode in which the learner acted ended
+    ret: jax.Array       # float: that episode's learner return (0 where not finished)
+    success: jax.Array   # float: that episode's success (0 where not finished)
+    decided: jax.Array   # bool: the learner decided in this tick
+    task_end: jax.Array  # bool: a whole-task episode (root at the bottom) ended naturally
+    task_success: jax.Array  # float: that episode's task success (0 where not ended)
+
+
+@struct.dataclass
+class TickStats:
+    """Sums over the batch (and over ticks once reduced)."""
+
+    env_episodes: jax.Array
+    learner_episodes: jax.Array
+    learner_return: jax.Array
+    learner_success: jax.Array
+    learner_decisions: jax.Array
+    task_episodes: jax.Array
+    task_success: jax.Array
+
+    @staticmethod
+    def of(ends: EpisodeEnds) -> "TickStats":
+        return TickStats(
+            env_episodes=ends.reset.sum(-1).astype(jnp.int32),
+            learner_episodes=ends.finished.sum(-1).astype(jnp.int32),
+            learner_return=ends.ret.sum(-1),
+            learner_success=ends.success.sum(-1),
+            learner_decisions=ends.decided.sum(-1).astype(jnp.int32),
+            task_episodes=ends.task_end.sum(-1).astype(jnp.int32),
+            task_success=ends.task_success.sum(-1),
+        )
+
+
+@dataclass(frozen=True)
+class Controls:
+    """Traced per-run controls of the tick (all arrays, so one compile serves every level).
+
+    learner: option id being trained (NO_OPTION: evaluation, nobody learns).
+    start: option placed at the bottom of the stack at each reset (0 = root; a template
+      id starts that template directly from reset states, as bottom-up training does).
+    learned: bool [num_options], options whose frozen policy is in the bank.
+    teleport: bool, unlearned templates may be teleported (None: as the runner was built;
+      False turns a teleporting runner into an evaluating one without another compile).
+    continue_episodes: bool, the environment goes on when the learner's option ends (None:
+      as the runner was built); its next episode starts where the levels above call it again.
+    temperature: float, how frozen policies pick: 0 greedy (argmax), else a sample at this
+      temperature (None: as the runner was built).
+    side_cost: float weight (or bool), a template learner is also rewarded by this times the
+      decrease of its template's ``side_cost`` (None or 0: never; fine-tuning turns it on).
+    gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs
+      with different discounts share one compile (a sweep).
+    """
+
+    learner: jax.Array
+    start: jax.Array
+    learned: jax.Array
+    teleport: jax.Array | None = None
+    continue_episodes: jax.Array | None = None
+    temperature: jax.Array | None = None
+    side_cost: jax.Array | None = None
+    gamma: jax.Array | None = None
