@@ -31,7 +31,8 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
     run = info["meta"]["run"]
     if task is not None and run["task"] != task:
         raise ValueError(f"{run_dir} is a run of {run['task']!r}, not {task!r}")
-    cfg = resolve_config(saved_run=run)
+    # (checkpoints of older versions record tensorboard in the run: playing writes no events)
+    cfg = resolve_config(saved_run=run, sets={"tensorboard": False})
     declared = run.get("hierarchy_declared")
     if declared is not None and hierarchy is None:
         raise ValueError(f"{run_dir} was trained with a hierarchy declared in code "
