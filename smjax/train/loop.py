@@ -1,8 +1,9 @@
 """The host loop shared by top-down, bottom-up and flat training.
 
-It runs compiled chunks (``Engine.chunk``) and, between them, counts episodes, checks
-each seed's running success against the threshold, draws progress, records curves and
-writes checkpoints; it never steps an environment itself. All seeds train together in
+It runs compiled chunks (``Engine.chunk``) and, between them, hands each chunk's
+statistics to the seeds' counters, decides (a seed's running success against the
+threshold, gates, the end of a level or of a fine-tuning turn), draws progress, records
+curves and writes checkpoints; it never steps an environment itself. All seeds train together in
 one compiled program, each at its own level: the option being trained and the option
 episodes start from are per-seed traced values, so a seed that finishes a level starts
 the next one in the next chunk instead of waiting for the slowest seed (only a seed that
