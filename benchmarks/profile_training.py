@@ -66,7 +66,7 @@ def build(args):
     from smjax.agents import make_agent
     from smjax.train.config import TrainConfig
     from smjax.train.engine import Engine, SeedState
-    from smjax.train.loop import plan_levels, resolve_hierarchy
+    from smjax.train.plans import plan_levels, resolve_hierarchy
 
     overrides = dict(kv.split("=", 1) for kv in args.env)
     env, params = smjax.make(args.task, **overrides)

@@ -123,7 +123,8 @@ def initialize_distributed(args) -> None:
 
 
 def _saved_run(args) -> dict | None:
-    """The checkpointed run ``--resume`` names (its config is the base), checked."""
+    """The checkpointed run ``--resume`` names (its config is the base), checked: its
+    identity and the settings it ran with (tensorboard, checkpoint_every)."""
     from smjax.train import checkpoint as ckpt
 
     if not args.resume:
@@ -137,36 +138,28 @@ def _saved_run(args) -> dict | None:
     if info is None:
         raise UsageError(f"nothing to resume: no checkpoint in {args.resume} (train with --out "
                          f"{args.resume} first)")
-    saved = info["meta"]["run"]
+    saved = info["meta"].get("settings", {}) | info["meta"]["run"]
     if saved.get("task") != args.task:
         raise UsageError(f"{args.resume} is a run of {saved.get('task')!r}, not {args.task!r}")
     return saved
 
 
 def build_config(args, saved: dict | None):
-    from smjax.train.config import TrainConfig, read_config_file
+    """The run's config from the flags (over the resumed run's, if any): ``resolve_config``."""
+    from smjax.train.config import resolve_config
 
-    names = set(TrainConfig.__dataclass_fields__)
-    data = {k: v for k, v in saved.items() if k in names} if saved else {}
-    if args.config:
-        data.update(read_config_file(args.config))  # only the fields the file sets
-    data.update(key_values(args.set, "--set"))
+    sets = key_values(args.set, "--set")
     for field, value in (("method", args.method), ("algo", args.algo), ("hierarchy", args.hierarchy),
                          ("num_envs", args.num_envs), ("threshold", args.threshold),
                          ("max_episodes_per_level", args.max_episodes),
                          ("max_steps_per_level", args.max_steps), ("finetune", args.finetune),
                          ("finetune_max_episodes", args.finetune_episodes)):
         if value is not None:
-            data[field] = value
+            sets[field] = value
     if args.tensorboard:
-        data["tensorboard"] = True
-    if args.agent:
-        agent = key_values(args.agent, "--agent")
-        if "gamma" in agent:
-            raise UsageError(f"--agent gamma={agent['gamma']} would be ignored: the discount is a "
-                             f"training setting; use --set gamma={agent['gamma']}")
-        data["agent"] = dict(data.get("agent", {})) | agent
-    return TrainConfig.from_dict(data)
+        sets["tensorboard"] = True
+    return resolve_config(saved_run=saved, file=args.config, sets=sets,
+                          agent=key_values(args.agent, "--agent"))
 
 
 def choose_seeds(args, saved: dict | None) -> list[int]:

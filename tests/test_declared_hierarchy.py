@@ -10,7 +10,7 @@ from hier_env import make_keydoor
 from smjax.options import HierarchyError, declare
 from smjax.train import TrainConfig
 from smjax.train.config import ConfigError
-from smjax.train.loop import declared_identity
+from smjax.train.plans import declared_identity
 from smjax.train.policy import load_trained
 from smjax.train.run import run
 

@@ -8,11 +8,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from _helpers import MachineLost, lose_machine_after_save
 from hier_env import KeyDoor, make_keydoor
 from smjax.agents import make_agent
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
-from smjax.train.loop import HierarchyTrainer
 from smjax.train.run import run
 from smjax.train.seed_arrays import freeze
 
@@ -102,25 +102,18 @@ def test_without_finetuning_the_counts_are_the_levels():
     assert res["total_episodes"] == [sum(rec["episodes"][0] for rec in res["levels"])]
 
 
-class _MachineLost(Exception):
-    pass
+def _in_a_second_turn(trainer) -> bool:
+    return any(trainer._finetuning(s) and trainer.state.finetune[s].turn >= 1
+               for s in range(len(trainer.seeds)))
 
 
 def test_resume_during_finetuning_is_exact(tmp_path, monkeypatch):
     # checkpoints at level and turn boundaries only (a save per chunk is slow)
     cfg = TrainConfig(**(SMALL | {"checkpoint_every": 1e9}))
     straight = run(make_keydoor(), cfg, [0, 1], tmp_path / "straight", progress=False)
-    save = HierarchyTrainer.save
-
-    def save_then_lose_the_machine(trainer):
-        save(trainer)
-        if any(trainer._finetuning(s) and trainer.host["finetune"]["turn"][s] >= 1
-               for s in range(len(trainer.seeds))):
-            raise _MachineLost  # in the second turn of a seed's fine-tuning
-
-    monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
+    lose_machine_after_save(monkeypatch, _in_a_second_turn)
     out = tmp_path / "moved"
-    with pytest.raises(_MachineLost):
+    with pytest.raises(MachineLost):
         run(make_keydoor(), cfg, [0, 1], out, progress=False)
     monkeypatch.undo()
     assert any(t >= 1 for t in ckpt.load_meta(out)["meta"]["host"]["finetune"]["turn"])

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
+from _helpers import MachineLost, lose_machine_after_save
 from hier_env import make_keydoor
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
-from smjax.train.loop import HierarchyTrainer
 from smjax.train.run import run
 
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
@@ -23,6 +23,7 @@ CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_
 SCRIPT = """
 import sys
 sys.path.insert(0, {tests!r})
+from _helpers import MachineLost, lose_machine_after_save
 from hier_env import make_keydoor
 from smjax.train import TrainConfig
 from smjax.train.run import run
@@ -77,25 +78,15 @@ def _resume_with_different_config_is_refused(out, empty):
         run(make_keydoor(), TrainConfig(**CFG), [0], empty, progress=False, resume=True)
 
 
-class _MachineLost(Exception):
-    pass
-
-
 def test_a_level_boundary_checkpoint_holds_the_next_level_and_resumes_exactly(tmp_path, monkeypatch):
     # checkpoints only at level boundaries (what a run that moves between machines uses)
     cfg = TrainConfig(**(CFG | {"max_episodes_per_level": 300, "checkpoint_every": 1e9}))
     straight = run(make_keydoor(), cfg, [0, 1], tmp_path / "straight", progress=False)
     assert len(straight["levels"]) >= 2
-    save = HierarchyTrainer.save
-
-    def save_then_lose_the_machine(trainer):
-        save(trainer)
-        if max(trainer.host["stage"]) == 1:  # a seed has just finished its first level
-            raise _MachineLost
-
-    monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
+    # a seed has just finished its first level
+    lose_machine_after_save(monkeypatch, lambda trainer: max(trainer.state.stage) == 1)
     out = tmp_path / "moved"
-    with pytest.raises(_MachineLost):
+    with pytest.raises(MachineLost):
         run(make_keydoor(), cfg, [0, 1], out, progress=False)
     monkeypatch.undo()
     host = ckpt.load_meta(out)["meta"]["host"]
@@ -106,5 +97,16 @@ def test_a_level_boundary_checkpoint_holds_the_next_level_and_resumes_exactly(tm
     for s in moved:
         assert host["episodes"][s] == 0 and host["env_steps"][s] == 0
         assert host["levels"][0]["episodes"][s] == straight["levels"][0]["episodes"][s]
-    resumed = run(make_keydoor(), cfg, [0, 1], out, progress=False, resume=True)
-    assert _strip_timing(resumed) == _strip_timing(straight)
+    # settings that do not change results are not part of the run's identity: a resume may
+    # change them, also of a checkpoint written before they left it (edited to look like one)
+    latest = ckpt.checkpoint_dir(out) / "latest.json"
+    index = json.loads(latest.read_text())
+    assert "checkpoint_every" not in index["meta"]["run"]
+    assert index["meta"].pop("settings") == {"tensorboard": False, "checkpoint_every": 1e9}
+    index["meta"]["run"] |= {"tensorboard": False, "checkpoint_every": 1e9}
+    latest.write_text(json.dumps(index))
+    changed = cfg.replace(tensorboard=True, checkpoint_every=1e8)
+    resumed = run(make_keydoor(), changed, [0, 1], out, progress=False, resume=True)
+    assert _strip_timing(resumed) | {"config": None} == _strip_timing(straight) | {"config": None}
+    assert resumed["config"] == straight["config"] | {"tensorboard": True, "checkpoint_every": 1e8}
+    assert list((out / "tensorboard").glob("events.out.tfevents.*"))

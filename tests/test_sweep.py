@@ -6,11 +6,11 @@ import jax
 import numpy as np
 import pytest
 
+from _helpers import MachineLost, lose_machine_after_save
 from hier_env import make_keydoor
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.engine import Engine
-from smjax.train.loop import HierarchyTrainer
 from smjax.train.run import run
 
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=300,
@@ -95,23 +95,13 @@ def test_a_gamma_sweep_point_equals_its_run_alone(tmp_path, lowered):
     assert _numbers(swept["points"][1]["results"]) != _numbers(alone)
 
 
-class _MachineLost(Exception):
-    pass
-
-
 def test_a_sweep_resumes_exactly_from_its_checkpoint(tmp_path, monkeypatch):
     cfg = TrainConfig(**CFG)
     straight = run(make_keydoor(), cfg, [0, 1], tmp_path / "straight", progress=False, sweep=SWEEP)
-    save = HierarchyTrainer.save
-
-    def save_then_lose_the_machine(trainer):
-        save(trainer)
-        if max(trainer.host["stage"]) == 1:  # a slot has just finished its first level
-            raise _MachineLost
-
-    monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
+    # a slot has just finished its first level
+    lose_machine_after_save(monkeypatch, lambda trainer: max(trainer.state.stage) == 1)
     out = tmp_path / "moved"
-    with pytest.raises(_MachineLost):
+    with pytest.raises(MachineLost):
         run(make_keydoor(), cfg, [0, 1], out, progress=False, sweep=SWEEP)
     monkeypatch.undo()
     assert len(ckpt.load_meta(out)["meta"]["host"]["stage"]) == 4  # all slots checkpointed

@@ -251,6 +251,41 @@ class TrainConfig:
         return cls.from_dict(read_config_file(path))
 
 
+# settings that do not change what a run computes: not part of a run's identity, so a
+# resume may change them (the output directory and progress bars are not config fields)
+RUN_SETTINGS = ("tensorboard", "checkpoint_every")
+
+
+def resolve_config(base: TrainConfig | None = None, *, saved_run: dict | None = None,
+                   file: str | Path | None = None, sets: dict | None = None,
+                   agent: dict | None = None) -> TrainConfig:
+    """The one place a run's configuration is assembled (``smjax train``, ``run`` and
+    ``load_trained`` / ``smjax render --policy`` all call it). Later sources override
+    earlier ones: ``base`` (a config, else the defaults), the fields a saved run recorded
+    (``saved_run``: a checkpoint's run identity; its other keys are ignored), the fields a
+    ``file`` sets, ``sets`` (field -> value), and ``agent``, merged into the learner's
+    hyper-parameters. Values from the sources are parsed strictly by each field's type and
+    the learner's overrides normalised as JSON stores them, so a resumed run compares
+    equal to its checkpoint."""
+    names = set(TrainConfig.__dataclass_fields__)
+    data = {k: v for k, v in (saved_run or {}).items() if k in names}
+    if file is not None:
+        data.update(read_config_file(file))  # only the fields the file sets
+    data.update(sets or {})
+    if agent:
+        if "gamma" in agent:
+            raise ConfigError(f"--agent gamma={agent['gamma']} would be ignored: the discount is "
+                              f"a training setting; use --set gamma={agent['gamma']}")
+        data["agent"] = dict(data.get("agent", base.agent if base is not None else {})) | agent
+    if base is None:
+        cfg = TrainConfig.from_dict(data)
+    elif data:
+        cfg = TrainConfig.from_dict(base.to_dict() | data)
+    else:
+        cfg = base
+    return cfg.replace(agent=normalize_agent(cfg.algo, cfg.agent))
+
+
 def read_config_file(path: str | Path) -> dict:
     """The fields a YAML/JSON config file sets (validated; defaults not filled in, so a
     resume is refused only for fields the file really sets)."""

@@ -1,37 +1,36 @@
 """The host loop shared by top-down, bottom-up and flat training.
 
-It runs compiled chunks (``Engine.chunk``) and, between them, counts episodes, checks
-each seed's running success against the threshold, draws progress, records curves and
-writes checkpoints; it never steps an environment itself. All seeds train together in
+It runs compiled chunks (``Engine.chunk``) and, between them, hands each chunk's
+statistics to the seeds' counters, decides (a seed's running success against the
+threshold, gates, the end of a level or of a fine-tuning turn), draws progress, records
+curves and writes checkpoints; it never steps an environment itself. All seeds train together in
 one compiled program, each at its own level: the option being trained and the option
 episodes start from are per-seed traced values, so a seed that finishes a level starts
 the next one in the next chunk instead of waiting for the slowest seed (only a seed that
 has finished every level is masked). A seed's numbers do not depend on the other seeds.
-Everything the loop knows lives in ``arrays`` (device state) and ``host`` (JSON-able
-counters), which is exactly what a checkpoint holds, so a resumed run continues bit for
-bit.
+Everything the loop knows lives in ``arrays`` (device state, ``TrainArrays``) and
+``state`` (host counters, ``TrainerState``; :mod:`smjax.train.state`), which is exactly
+what a checkpoint holds, so a resumed run continues bit for bit.
 """
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
-from dataclasses import dataclass
-from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from smjax.options.hierarchy import Hierarchy
 from smjax.train import checkpoint as ckpt
 from smjax.train import finetune as ft
 from smjax.train.seed_arrays import all_finite, fold_in, freeze, local, select_seeds, split_seeds
 from smjax.train import distributed as dist
-from smjax.train.config import ConfigError, TrainConfig
+from smjax.train.config import RUN_SETTINGS, TrainConfig
 from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
+from smjax.train.plans import LevelPlan, plan_levels
 from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
+from smjax.train.state import TrainArrays, TrainerState
 
 
 # 2: learner states carry their sweepable hyper-parameters (state.hp)
@@ -40,89 +39,6 @@ CHECKPOINT_FORMAT = 2
 
 class NonFiniteError(FloatingPointError):
     """A learner produced non-finite parameters (``run`` says which checkpoint is kept)."""
-
-
-@dataclass
-class LevelPlan:
-    name: str        # option trained
-    option: int      # its option id
-    start: int       # option at the bottom of the stack at each reset
-    level: int       # the paper's level number
-
-
-def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
-                      ) -> tuple[str, Hierarchy]:
-    """The hierarchy a run uses: ``given`` (one declared by the caller, named
-    ``declared:<task>``), else "flat" for the flat method, else the named one, else the
-    environment's default: the first of its catalogue (``env.hierarchies()``)."""
-    if given is not None:
-        if not isinstance(given, Hierarchy):
-            raise ConfigError(f"hierarchy must be a name or a smjax.options.Hierarchy (e.g. from "
-                              f"declare(env, task, children)), got {type(given).__name__}")
-        if cfg.method == "flat":
-            raise ConfigError("the flat method trains the environment's flat hierarchy; a "
-                              "declared hierarchy is for top-down or bottom-up")
-        return f"declared:{given.task}", given
-    options = env.hierarchies()
-    if not options:
-        raise ValueError(f"environment {env.name!r} declares no hierarchies")
-    name = "flat" if cfg.method == "flat" else cfg.hierarchy
-    if name is None:
-        name = next(iter(options))
-    if name not in options:
-        raise ValueError(
-            f"unknown hierarchy {name!r} for {env.name!r}; valid: {', '.join(options)}")
-    return name, options[name]
-
-
-def declared_identity(h: Hierarchy) -> dict:
-    """What a resume must find again of a declared hierarchy (its shape and template names;
-    the templates' functions cannot be compared)."""
-    identity = {"task": h.task, "children": {k: list(v) for k, v in h.children.items()},
-                "templates": sorted(h.templates)}
-    if h.success is not None:  # only where declared, so older checkpoints still resume
-        identity["success"] = getattr(h.success, "__qualname__", type(h.success).__name__)
-    return identity
-
-
-def plan_levels(h: Hierarchy, method: str) -> list[LevelPlan]:
-    """Learning order: top-down (root first), bottom-up (deepest first, each from resets)."""
-    names = list(h.learnable)
-    if method == "flat":
-        names = names[:1]
-    if method == "bottom-up":
-        names = names[::-1]
-    plans = []
-    for name in names:
-        option = h.option_index(name)
-        start = option if (method == "bottom-up" and option != 0) else 0
-        plans.append(LevelPlan(name, option, start, h.level(name)))
-    return plans
-
-
-def running_success(history: list, window: int) -> float:
-    """Mean success over (at least) the last ``window`` learner episodes (NaN if fewer)."""
-    total, count = 0.0, 0
-    for s, c in reversed(history):
-        total, count = total + s, count + c
-        if count >= window:
-            break
-    return total / count if count >= window else float("nan")
-
-
-# a seed's bookkeeping for the level it is in (host state, checkpointed), and its start values
-LEVEL_COUNTERS = {"episodes": 0, "env_steps": 0, "history": None, "running": None,
-                  "reached": False,
-                  "gate_success": None, "gate_attempts": 0, "gate_env_steps": 0, "gate_next": 0}
-
-
-def _level_record(plan: LevelPlan, num_seeds: int) -> dict:
-    """A level's entry of results.json; each seed's values are filled when it finishes."""
-    return {"template": plan.name, "level": plan.level,
-            **{k: [None] * num_seeds for k in (
-                "episodes", "env_steps", "reached", "final_running_success",
-                # the last gate attempt's success (None: never tried), attempts, env steps
-                "gate_success", "gate_attempts", "gate_env_steps")}}
 
 
 class HierarchyTrainer(ft.FinetunePhase):
@@ -150,22 +66,11 @@ class HierarchyTrainer(ft.FinetunePhase):
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
         keys, k_init, k_reset = split_seeds(keys, 3)
         learner = self._init_learner(k_init)
-        self.arrays = {
-            "keys": keys,
-            "state": SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
-            "bank": engine.new_bank(learner),
-            "learned": jnp.zeros((S, engine.h.num_options), bool),
-        }
-        self.host: dict[str, Any] = {
-            # the plan each seed trains; len(plans): fine-tuning; num_stages: done
-            "stage": [0] * S,
-            "started": [False] * S,  # the seed's current level has been set up
-            "levels": [_level_record(p, S) for p in plans], "curves": [],
-            "finetune": ft.new_record(S),
-            "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": 0,
-            **{k: [v] * S for k, v in LEVEL_COUNTERS.items()},
-        }
-        self.host["history"] = [[] for _ in range(S)]
+        self.arrays = TrainArrays(
+            bank=engine.new_bank(learner), keys=keys,
+            learned=jnp.zeros((S, engine.h.num_options), bool),
+            state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys))
+        self.state = TrainerState.new(plans, S)
         self._compiled = None
         self._last_save = time.perf_counter()
         self.mesh = training_mesh(S, self.cfg.num_envs)
@@ -180,14 +85,12 @@ class HierarchyTrainer(ft.FinetunePhase):
         """Put the training state on the mesh (seed axis, then environment axis)."""
         if self.mesh is None:
             return
-        arrays = self.arrays
-        shardings = {
-            "keys": seed_sharding(self.mesh, arrays["keys"]),
-            "state": state_shardings(self.mesh, arrays["state"]),
-            "bank": seed_sharding(self.mesh, arrays["bank"]),
-            "learned": seed_sharding(self.mesh, arrays["learned"]),
-        }
-        self.arrays = dist.place(arrays, shardings)
+        a = self.arrays
+        shardings = TrainArrays(bank=seed_sharding(self.mesh, a.bank),
+                                keys=seed_sharding(self.mesh, a.keys),
+                                learned=seed_sharding(self.mesh, a.learned),
+                                state=state_shardings(self.mesh, a.state))
+        self.arrays = dist.place(a, shardings)
 
     def _place_small(self, tree):
         """Small per-call inputs (flags, masks) on the mesh: with several processes every
@@ -201,10 +104,13 @@ class HierarchyTrainer(ft.FinetunePhase):
         """Checkpoint (collective with several processes: all gather, process 0 writes)."""
         if self.out_dir is None:
             return
-        meta = {"host": self.host, "run": self.run_meta, "format": CHECKPOINT_FORMAT}
+        # the settings a resume starts from unless told otherwise (not the run's identity)
+        settings = {k: getattr(self.cfg, k) for k in RUN_SETTINGS}
+        meta = {"host": self.state.to_json(), "run": self.run_meta, "settings": settings,
+                "format": CHECKPOINT_FORMAT}
         arrays = dist.gather(self.arrays) if dist.is_multiprocess() else self.arrays
         if self.writer:
-            ckpt.save_checkpoint(self.out_dir, self.host["chunks"], arrays, meta)
+            ckpt.save_checkpoint(self.out_dir, self.state.chunks, arrays, meta)
         self._last_save = time.perf_counter()
 
     def restore(self) -> bool:
@@ -223,30 +129,30 @@ class HierarchyTrainer(ft.FinetunePhase):
             self.arrays = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
         else:
             self.arrays = ckpt.load_arrays(self.out_dir, self.arrays)
-        self.host = info["meta"]["host"]
+        self.state = TrainerState.from_json(info["meta"]["host"])
         self._place()
         return True
 
     # ---- the loop ------------------------------------------------------------------
     def run(self) -> dict:
-        t_start = time.perf_counter() - self.host["wall_seconds"]
-        self._start_levels([s for s, done in enumerate(self.host["started"]) if not done
-                            and self.host["stage"][s] < self.num_stages])
+        st = self.state
+        t_start = time.perf_counter() - st.wall_seconds
+        self._start_levels([s for s in self._training() if not st.started[s]])
         bar = Progress(self) if self.progress else None
         while self._training():
             t0 = time.perf_counter()
             stats = self._chunk()
             dt = time.perf_counter() - t0
             candidates, task_candidates = self._account(stats)
-            self.host["chunks"] += 1
+            st.chunks += 1
             passed = self._accept(candidates)
             task_passed = self._accept_task(task_candidates)
             ended = [s for s in self._training() if not self._finetuning(s)
                      and (s in passed or self._budget_spent(self._level_cfg(s), s))]
             for s in passed:
-                self.host["reached"][s] = True
+                st.level[s].reached = True
             phase_ended, turn_ended = self._finetune_ends(task_passed)
-            self.host["wall_seconds"] = time.perf_counter() - t_start
+            st.wall_seconds = time.perf_counter() - t_start
             if ended or phase_ended or turn_ended:
                 self._finish_levels(ended)
                 self._finish_turns(turn_ended + phase_ended, phase_ended)
@@ -254,7 +160,7 @@ class HierarchyTrainer(ft.FinetunePhase):
                 # fresh learners (an empty replay buffer compresses to nothing), not the
                 # finished ones
                 self._start_levels([s for s in ended + turn_ended
-                                    if self.host["stage"][s] < self.num_stages])
+                                    if st.stage[s] < self.num_stages])
             if bar is not None:
                 bar.draw(dt)
             if self.out_dir is not None and (ended or phase_ended or turn_ended
@@ -266,17 +172,17 @@ class HierarchyTrainer(ft.FinetunePhase):
 
     def _training(self) -> list[int]:
         """Seeds that still have a level to train (or are fine-tuning)."""
-        return [s for s, i in enumerate(self.host["stage"]) if i < self.num_stages]
+        return [s for s, i in enumerate(self.state.stage) if i < self.num_stages]
 
     def _finetuning(self, s: int) -> bool:
-        return bool(self.ft_order) and self.host["stage"][s] == len(self.plans)
+        return bool(self.ft_order) and self.state.stage[s] == len(self.plans)
 
     def _plan(self, s: int) -> LevelPlan:
         """The level a seed trains, or the option whose turn it is in fine-tuning."""
         if self._finetuning(s):
-            turn = self.host["finetune"]["turn"][s]
+            turn = self.state.finetune[s].turn
             return self.ft_order[turn % len(self.ft_order)]
-        return self.plans[min(self.host["stage"][s], len(self.plans) - 1)]
+        return self.plans[min(self.state.stage[s], len(self.plans) - 1)]
 
     def _level_cfg(self, s: int) -> TrainConfig:
         return self.cfg.for_level(self._plan(s).name)
@@ -289,12 +195,18 @@ class HierarchyTrainer(ft.FinetunePhase):
     def _per_seed(self, values, dtype) -> jax.Array:
         return self._place_small(jnp.asarray(values, dtype))
 
+    def _mask(self, seeds: list[int]) -> jax.Array:
+        return jnp.asarray([s in seeds for s in range(len(self.seeds))])
+
+    def _options(self) -> jax.Array:
+        """Per seed, the option it trains."""
+        return jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
+
     def _chunk(self):
         """One compiled chunk for every seed at its own level; returns its stats [S, U]."""
-        host = self.host
-        S = len(self.seeds)
-        active = self._per_seed([i < self.num_stages for i in host["stage"]], bool)
-        learner = self._per_seed([self._plan(s).option for s in range(S)], jnp.int32)
+        S, a = len(self.seeds), self.arrays
+        active = self._per_seed([i < self.num_stages for i in self.state.stage], bool)
+        learner = self._place_small(self._options())
         start = self._per_seed([self._plan(s).start for s in range(S)], jnp.int32)
         # levels: teleports on; fine-tuning: the learned hierarchy alone, whole episodes
         tuning = [self._finetuning(s) for s in range(S)]
@@ -303,24 +215,25 @@ class HierarchyTrainer(ft.FinetunePhase):
         weight = self.cfg.finetune_side_cost_weight if self.cfg.finetune_side_cost else 0.0
         side_cost = self._per_seed([weight if t else 0.0 for t in tuning], jnp.float32)
         gamma = self._per_seed([self._gamma(s) for s in range(S)], jnp.float32)
-        args = (self.arrays["state"], active, self.arrays["bank"], self.arrays["learned"],
-                learner, start, teleport, keep, side_cost, gamma)
+        args = (a.state, active, a.bank, a.learned, learner, start, teleport, keep, side_cost,
+                gamma)
         if self._compiled is None:  # one compile serves every level (ids are traced)
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()
-            host["compile_seconds"] += time.perf_counter() - t0
+            self.state.compile_seconds += time.perf_counter() - t0
         state, stats, _ = self._compiled(*args)
         stats = dist.gather(stats)  # [S, U], the same on every process
         if not all_finite(state.learner.params):
             where = ", ".join(f"seed {self.seeds[s]} level {self._plan(s).level} "
                               f"({self._plan(s).name})" for s in self._training())
-            raise NonFiniteError(f"non-finite learner parameters in chunk {host['chunks']} "
+            raise NonFiniteError(f"non-finite learner parameters in chunk {self.state.chunks} "
                                  f"(training: {where})")
-        self.arrays["state"] = state
+        self.arrays = a.replace(state=state)
         return stats
 
     def _evaluate(self, t_start: float) -> dict:
-        keys, k_eval = split_seeds(local(self.arrays["keys"]), 2)
+        a, st = self.arrays, self.state
+        keys, k_eval = split_seeds(local(a.keys), 2)
         if self.mesh is not None:
             k_eval = dist.place(k_eval, seed_sharding(self.mesh, k_eval))
         # under the run's frozen policy (final_success), then under every other mode
@@ -328,22 +241,20 @@ class HierarchyTrainer(ft.FinetunePhase):
         for policy in [self.engine.frozen_policy] + [
                 p for p in EVAL_TEMPERATURES if p != self.engine.frozen_policy]:
             result, compile_s = self.engine.evaluate(
-                k_eval, self.arrays["bank"], self.arrays["learned"],
-                place=self._place_small, policy=policy)
-            self.host["compile_seconds"] += compile_s
+                k_eval, a.bank, a.learned, place=self._place_small, policy=policy)
+            st.compile_seconds += compile_s
             by_policy[policy] = dist.gather(result)
-        self.host["wall_seconds"] = time.perf_counter() - t_start
+        st.wall_seconds = time.perf_counter() - t_start
         if self._tb is not None:
             self._tb.close()
         # a curve row's 7th entry is its slot (a sweep splits the rows by point)
-        return {"levels": self.host["levels"], "curves": [r[:6] for r in self.host["curves"]],
-                "curve_slots": [r[6] if len(r) > 6 else None for r in self.host["curves"]],
+        return {"levels": st.levels, "curves": [r[:6] for r in st.curves],
+                "curve_slots": [r[6] if len(r) > 6 else None for r in st.curves],
                 "final": by_policy[self.engine.frozen_policy], "final_by_policy": by_policy,
                 "eval_policy": self.engine.frozen_policy,
-                "finetune": self.host["finetune"] if self.ft_order else None,
-                "bank": self.arrays["bank"], "learned": self.arrays["learned"],
-                "wall_seconds": self.host["wall_seconds"],
-                "compile_seconds": self.host["compile_seconds"]}
+                "finetune": st.finetune_record() if self.ft_order else None,
+                "bank": a.bank, "learned": a.learned,
+                "wall_seconds": st.wall_seconds, "compile_seconds": st.compile_seconds}
 
     def _start_levels(self, seeds: list[int]) -> None:
         """Fresh learners, keys and environments for these seeds' next level or fine-tuning
@@ -353,24 +264,20 @@ class HierarchyTrainer(ft.FinetunePhase):
             return
         # computed for every seed and selected, so that every call has the same shapes
         # (one compile per run, however many seeds start at once)
-        arrays = jax.tree.map(local, self.arrays)
-        keys, k_init, k_reset, k_run = split_seeds(arrays["keys"], 4)
+        a = jax.tree.map(local, self.arrays)
+        keys, k_init, k_reset, k_run = split_seeds(a.keys, 4)
         starts = jnp.asarray([self._plan(s).start for s in range(len(self.seeds))], jnp.int32)
         learner = self._init_learner(k_init)
         tuning = [s for s in seeds if self._finetuning(s)]
         if tuning:
-            options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
-            warm = self.engine.warm_start(learner, ft.bank_rows(arrays["bank"], options))
+            warm = self.engine.warm_start(learner, ft.bank_rows(a.bank, self._options()))
             learner = select_seeds(self._mask(tuning), warm, learner)
         fresh = SeedState(self.engine.reset(k_reset, starts), learner, k_run)
-        arrays["keys"], arrays["state"] = select_seeds(
-            self._mask(seeds), (keys, fresh), (arrays["keys"], arrays["state"]))
-        self.arrays = arrays
+        keys, state = select_seeds(self._mask(seeds), (keys, fresh), (a.keys, a.state))
+        self.arrays = a.replace(keys=keys, state=state)
         self._place()
         for s in seeds:
-            for k, v in LEVEL_COUNTERS.items():
-                self.host[k][s] = [] if k == "history" else v
-            self.host["started"][s] = True
+            self.state.start(s)
 
     def _init_learner(self, keys: jax.Array):
         """Fresh learners per slot, with each slot's swept hyper-parameters."""
@@ -379,114 +286,88 @@ class HierarchyTrainer(ft.FinetunePhase):
             learner = learner.replace(hp={**learner.hp, **self.slot_hp})
         return learner
 
-    def _mask(self, seeds: list[int]) -> jax.Array:
-        return jnp.asarray([s in seeds for s in range(len(self.seeds))])
-
     def _save_due(self) -> bool:
         due = time.perf_counter() - self._last_save >= self.cfg.checkpoint_every
         # clocks differ between processes, and saving is collective: process 0 decides
         return dist.agree(due) if self.cfg.checkpoint_every > 0 else due
 
     def _account(self, stats) -> tuple[list[int], list[int]]:
-        """Count a chunk's episodes and steps; the seeds whose running success reached the
-        threshold (levels), and the fine-tuning seeds whose task success reached theirs."""
-        host = self.host
-        steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
-        candidates = []
+        """Count a chunk's episodes and steps and record the curves; the seeds whose running
+        success reached the threshold (levels), and the fine-tuning seeds whose task success
+        reached theirs."""
         task_candidates = [s for s in self._training() if self._finetuning(s)
                            and self._account_task(stats, s)]
+        candidates = []
+        steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
         for s in self._training():
-            plan, cfg, seed = self._plan(s), self._level_cfg(s), self.seeds[s]
-            for u in range(cfg.updates_per_chunk):
-                host["episodes"][s] += int(stats.env_episodes[s, u])
-                host["env_steps"][s] += steps_per_update
-                n = int(stats.learner_episodes[s, u])
-                if n:
-                    host["history"][s].append([float(stats.learner_success[s, u]), n])
-                run = running_success(host["history"][s], cfg.success_window)
-                host["running"][s] = None if math.isnan(run) else run
+            plan, cfg, seed, c = self._plan(s), self._level_cfg(s), self.seeds[s], self.state.level[s]
+            rows = c.count(stats.env_episodes[s], stats.learner_success[s],
+                           stats.learner_episodes[s], steps_per_update, cfg.success_window)
+            for episodes, env_steps, running in rows:
                 if not self._finetuning(s):  # (fine-tuning records the task's curve)
-                    host["curves"].append([seed, plan.level, plan.name, host["episodes"][s],
-                                           host["env_steps"][s], host["running"][s], s])
-                if self._tb is not None and host["running"][s] is not None:
+                    self.state.curves.append([seed, plan.level, plan.name, episodes, env_steps,
+                                              running, s])
+                if self._tb is not None and running is not None:
                     tag = f"seed_{seed}/level_{plan.level}_{plan.name}"
-                    self._tb.add_scalar(f"{tag}/running_success", host["running"][s],
-                                        host["env_steps"][s])
-                    self._tb.add_scalar(f"{tag}/episodes", host["episodes"][s], host["env_steps"][s])
-            # keep only as much history as the window needs
-            hist, count, keep = host["history"][s], 0, 0
-            for _, c in reversed(hist):
-                keep, count = keep + 1, count + c
-                if count >= cfg.success_window:
-                    break
-            host["history"][s] = hist[len(hist) - keep:]
-            run = host["running"][s]
-            if run is not None and run >= cfg.threshold and not self._finetuning(s):
+                    self._tb.add_scalar(f"{tag}/running_success", running, env_steps)
+                    self._tb.add_scalar(f"{tag}/episodes", episodes, env_steps)
+            if (c.running is not None and c.running >= cfg.threshold
+                    and not self._finetuning(s)):
                 candidates.append(s)
         return candidates, task_candidates
 
     def _budget_spent(self, cfg: TrainConfig, s: int) -> bool:
-        host = self.host
-        return host["episodes"][s] >= cfg.max_episodes_per_level or bool(
-            cfg.max_steps_per_level and host["env_steps"][s] >= cfg.max_steps_per_level)
+        c = self.state.level[s]
+        return c.episodes >= cfg.max_episodes_per_level or bool(
+            cfg.max_steps_per_level and c.env_steps >= cfg.max_steps_per_level)
 
     def _accept(self, candidates: list[int]) -> list[int]:
         """Seeds (of ``candidates``, whose running success reached the threshold) whose
         level ends now: all of them without the gate; with it, those whose frozen policy
         passes a gate attempt (tried every ``gate_interval`` chunks, and once more when
         the budget is spent)."""
-        host = self.host
+        st, a = self.state, self.arrays
         if not self.cfg.gate or not candidates:
             return candidates
-        due = [s for s in candidates if host["chunks"] >= host["gate_next"][s]
+        due = [s for s in candidates if st.chunks >= st.level[s].gate_next
                or self._budget_spent(self._level_cfg(s), s)]
         if not due:
             return []
         S = len(self.seeds)
         # the attempt number varies the gate's episodes between attempts, deterministically
-        keys = fold_in(self.arrays["keys"], jnp.asarray(host["chunks"], jnp.uint32))
+        keys = fold_in(a.keys, jnp.asarray(st.chunks, jnp.uint32))
         plans = [self._plan(s) for s in range(S)]
         # one vmapped call for all seeds; those not due are skipped (their results unused)
         result, compile_s = self.engine.gate(
-            keys, self.arrays["state"], self.arrays["bank"], self.arrays["learned"],
-            [p.option for p in plans], [p.start for p in plans], [s in due for s in range(S)],
+            keys, a.state, a.bank, a.learned, [p.option for p in plans],
+            [p.start for p in plans], [s in due for s in range(S)],
             [self._level_cfg(s).threshold for s in range(S)], place=self._place_small)
-        host["compile_seconds"] += compile_s
+        st.compile_seconds += compile_s
         result = dist.gather(result)
         passed = []
         for s in due:
-            success = ft.record_gate(host, s, result,
-                                     host["chunks"] + self._level_cfg(s).gate_interval)
+            c, cfg = st.level[s], self._level_cfg(s)
+            success = c.record_gate(result, s, st.chunks + cfg.gate_interval)
             if self._tb is not None:
                 tag = f"seed_{self.seeds[s]}/level_{plans[s].level}_{plans[s].name}"
-                self._tb.add_scalar(f"{tag}/gate_success", success, host["env_steps"][s])
-            if success >= self._level_cfg(s).threshold:
+                self._tb.add_scalar(f"{tag}/gate_success", success, c.env_steps)
+            if success >= cfg.threshold:
                 passed.append(s)
         return passed
 
     def _freeze_learners(self, seeds: list[int]) -> None:
         """Store these seeds' learner params in their banks at the option they train."""
-        options = jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
-        arrays = jax.tree.map(local, self.arrays)
-        arrays["bank"], arrays["learned"] = freeze(
-            self._mask(seeds), options, arrays["state"].learner.params, arrays["bank"],
-            arrays["learned"])
-        self.arrays = arrays
+        a = jax.tree.map(local, self.arrays)
+        bank, learned = freeze(self._mask(seeds), self._options(), a.state.learner.params,
+                               a.bank, a.learned)
+        self.arrays = a.replace(bank=bank, learned=learned)
         self._place()
 
     def _finish_levels(self, seeds: list[int]) -> None:
         """Freeze these seeds' learners into the bank and record their levels."""
         if not seeds:
             return
-        host = self.host
         self._freeze_learners(seeds)
         for s in seeds:
-            record = host["levels"][host["stage"][s]]
-            for name, key in (("episodes", "episodes"), ("env_steps", "env_steps"),
-                              ("reached", "reached"), ("final_running_success", "running"),
-                              ("gate_success", "gate_success"), ("gate_attempts", "gate_attempts"),
-                              ("gate_env_steps", "gate_env_steps")):
-                record[name][s] = host[key][s]
-            host["stage"][s] += 1
-            host["started"][s] = False
+            self.state.finish_level(s)
         self._evaluate_before([s for s in seeds if self._finetuning(s)])

@@ -10,9 +10,10 @@ import numpy as np
 from smjax.core.registry import make
 from smjax.options.runner import NO_OPTION, Controls
 from smjax.train import checkpoint as ckpt
-from smjax.train.config import TrainConfig
+from smjax.train.config import resolve_config
 from smjax.train.engine import Engine
-from smjax.train.loop import HierarchyTrainer, declared_identity, plan_levels, resolve_hierarchy
+from smjax.train.loop import HierarchyTrainer
+from smjax.train.plans import declared_identity, plan_levels, resolve_hierarchy
 
 
 def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None = None,
@@ -30,8 +31,8 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
     run = info["meta"]["run"]
     if task is not None and run["task"] != task:
         raise ValueError(f"{run_dir} is a run of {run['task']!r}, not {task!r}")
-    fields = set(TrainConfig.__dataclass_fields__)
-    cfg = TrainConfig.from_dict({k: v for k, v in run.items() if k in fields})
+    # (checkpoints of older versions record tensorboard in the run: playing writes no events)
+    cfg = resolve_config(saved_run=run, sets={"tensorboard": False})
     declared = run.get("hierarchy_declared")
     if declared is not None and hierarchy is None:
         raise ValueError(f"{run_dir} was trained with a hierarchy declared in code "
@@ -45,12 +46,12 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
     trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), run["seeds"],
                                out_dir=run_dir, progress=False, run_meta=run)
     trainer.restore()
-    done, total = min(trainer.host["stage"]), len(trainer.plans)
+    done, total = min(trainer.state.stage), len(trainer.plans)
     if done < total and not partial:
         raise ValueError(f"{run_dir} stopped with a seed after {done} of {total} levels, so its hierarchy is "
                          f"partly untrained; finish it with `smjax train {run['task']} --resume "
                          f"{run_dir}`, or pass --partial to play it anyway")
-    return engine, trainer.arrays["bank"], trainer.arrays["learned"], run["seeds"]
+    return engine, trainer.arrays.bank, trainer.arrays.learned, run["seeds"]
 
 
 def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 500, key=None,

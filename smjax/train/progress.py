@@ -17,25 +17,25 @@ class Progress:
         self.trainer = trainer
         seeds, levels = len(trainer.seeds), len(trainer.plans)
         stages = trainer.num_stages  # the levels, and fine-tuning where it runs
-        done = int(sum(trainer.host["stage"]))
+        done = int(sum(trainer.state.stage))
         what = f"{levels} level{'s' * (levels > 1)}" + (" + fine-tune" if stages > levels else "")
         self.bar = tqdm(total=seeds * stages, initial=done, unit="stage", leave=True,
                         desc=f"{seeds} seed{'s' * (seeds > 1)} x {what}")
 
     def draw(self, chunk_seconds: float) -> None:
-        trainer, host = self.trainer, self.trainer.host
+        trainer, st = self.trainer, self.trainer.state
         cfg = trainer.cfg
         training = trainer._training()
         steps = cfg.updates_per_chunk * cfg.num_envs * cfg.rollout_ticks * len(training)
-        self.bar.n = int(sum(host["stage"]))
+        self.bar.n = int(sum(st.stage))
         at = [f"L{trainer._plan(s).level}" if not trainer._finetuning(s) else "FT"
               for s in training]
         extra = {"at": " ".join(f"{a}x{at.count(a)}" for a in sorted(set(at)))} if at else {}
         levels = [s for s in training if not trainer._finetuning(s)]
-        runs = [host["running"][s] for s in levels if host["running"][s] is not None]
-        gates = [host["gate_success"][s] for s in levels if host["gate_success"][s] is not None]
-        tasks = [host["finetune"]["task_running"][s] for s in training
-                 if trainer._finetuning(s) and host["finetune"]["task_running"][s] is not None]
+        runs = [st.level[s].running for s in levels if st.level[s].running is not None]
+        gates = [st.level[s].gate_success for s in levels if st.level[s].gate_success is not None]
+        tasks = [st.finetune[s].task_running for s in training
+                 if trainer._finetuning(s) and st.finetune[s].task_running is not None]
         if tasks:  # fine-tuning: the teleport-free task success
             extra["task"] = f"{np.mean(tasks):.2f}"
         if runs:
@@ -45,12 +45,12 @@ class Progress:
         by_steps = any(trainer._level_cfg(s).max_steps_per_level for s in training)
         counts = "env_steps" if by_steps else "episodes"
         if training:
-            extra[counts] = f"{np.mean([host[counts][s] for s in training]):,.0f}"
+            extra[counts] = f"{np.mean([getattr(st.level[s], counts) for s in training]):,.0f}"
             extra["steps_s"] = f"{steps / max(chunk_seconds, 1e-9):,.0f}"
         self.bar.set_postfix(**extra)
         self.bar.refresh()
 
     def close(self) -> None:
-        self.bar.n = int(sum(self.trainer.host["stage"]))
+        self.bar.n = int(sum(self.trainer.state.stage))
         self.bar.refresh()
         self.bar.close()

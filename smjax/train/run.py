@@ -10,11 +10,12 @@ from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
 from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
-from smjax.train.config import ConfigError, TrainConfig, config_differences, normalize_agent
+from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_differences,
+                                 resolve_config)
 from smjax.train.engine import Engine
 from smjax.options.hierarchy import Hierarchy
-from smjax.train.loop import (HierarchyTrainer, NonFiniteError, declared_identity, plan_levels,
-                              resolve_hierarchy)
+from smjax.train.loop import HierarchyTrainer, NonFiniteError
+from smjax.train.plans import declared_identity, plan_levels, resolve_hierarchy
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.results import build_results, write_results, write_sweep
@@ -33,14 +34,12 @@ def validate_seeds(seeds) -> list[int]:
     return seeds
 
 
-# settings that do not change what a run computes: a resume may change them
-RESUME_FREE_FIELDS = ("tensorboard", "checkpoint_every")
-
-
 def run_identity(task_name: str, cfg: TrainConfig, seeds: list[int], env_overrides: dict) -> dict:
     """What must match for a checkpoint to be resumed (as JSON stores it: tuples are lists,
-    so a resumed run compares equal to what its checkpoint saved)."""
-    identity = {"task": task_name, "seeds": seeds, "env_overrides": env_overrides} | cfg.to_dict()
+    so a resumed run compares equal to what its checkpoint saved): the task, seeds,
+    environment overrides and every config field but ``RUN_SETTINGS``."""
+    config = {k: v for k, v in cfg.to_dict().items() if k not in RUN_SETTINGS}
+    identity = {"task": task_name, "seeds": seeds, "env_overrides": env_overrides} | config
     return json.loads(json.dumps(identity))
 
 
@@ -50,7 +49,8 @@ def check_resumable(out_dir, identity: dict) -> bool:
     if info is None:
         return False
     saved = info["meta"]["run"]
-    diff = [k for k in config_differences(saved, identity) if k not in RESUME_FREE_FIELDS]
+    # (checkpoints of older versions recorded RUN_SETTINGS in the identity too)
+    diff = [k for k in config_differences(saved, identity) if k not in RUN_SETTINGS]
     if diff:
         details = ", ".join(f"{k}: checkpoint {saved.get(k)!r} vs now {identity.get(k)!r}" for k in diff)
         raise ConfigError(f"cannot resume {out_dir}: the run differs in {details}")
@@ -120,7 +120,7 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
         if dist.is_writer():
             print("smjax: fine-tuning is off in a multi-process run (not supported there yet)",
                   file=sys.stderr)
-    cfg = cfg.replace(agent=normalize_agent(cfg.algo, cfg.agent))
+    cfg = resolve_config(cfg)
     env_overrides = dict(env_overrides or {})
     if sweep is not None:  # refused before anything is locked or compiled
         if dist.is_multiprocess():

@@ -1,0 +1,65 @@
+"""What a run trains, in which order: its hierarchy and the plan of its levels."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from smjax.options.hierarchy import Hierarchy
+from smjax.train.config import ConfigError, TrainConfig
+
+
+@dataclass
+class LevelPlan:
+    name: str        # option trained
+    option: int      # its option id
+    start: int       # option at the bottom of the stack at each reset
+    level: int       # the paper's level number
+
+
+def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
+                      ) -> tuple[str, Hierarchy]:
+    """The hierarchy a run uses: ``given`` (one declared by the caller, named
+    ``declared:<task>``), else "flat" for the flat method, else the named one, else the
+    environment's default: the first of its catalogue (``env.hierarchies()``)."""
+    if given is not None:
+        if not isinstance(given, Hierarchy):
+            raise ConfigError(f"hierarchy must be a name or a smjax.options.Hierarchy (e.g. from "
+                              f"declare(env, task, children)), got {type(given).__name__}")
+        if cfg.method == "flat":
+            raise ConfigError("the flat method trains the environment's flat hierarchy; a "
+                              "declared hierarchy is for top-down or bottom-up")
+        return f"declared:{given.task}", given
+    options = env.hierarchies()
+    if not options:
+        raise ValueError(f"environment {env.name!r} declares no hierarchies")
+    name = "flat" if cfg.method == "flat" else cfg.hierarchy
+    if name is None:
+        name = next(iter(options))
+    if name not in options:
+        raise ValueError(
+            f"unknown hierarchy {name!r} for {env.name!r}; valid: {', '.join(options)}")
+    return name, options[name]
+
+
+def declared_identity(h: Hierarchy) -> dict:
+    """What a resume must find again of a declared hierarchy (its shape and template names;
+    the templates' functions cannot be compared)."""
+    identity = {"task": h.task, "children": {k: list(v) for k, v in h.children.items()},
+                "templates": sorted(h.templates)}
+    if h.success is not None:  # only where declared, so older checkpoints still resume
+        identity["success"] = getattr(h.success, "__qualname__", type(h.success).__name__)
+    return identity
+
+
+def plan_levels(h: Hierarchy, method: str) -> list[LevelPlan]:
+    """Learning order: top-down (root first), bottom-up (deepest first, each from resets)."""
+    names = list(h.learnable)
+    if method == "flat":
+        names = names[:1]
+    if method == "bottom-up":
+        names = names[::-1]
+    plans = []
+    for name in names:
+        option = h.option_index(name)
+        start = option if (method == "bottom-up" and option != 0) else 0
+        plans.append(LevelPlan(name, option, start, h.level(name)))
+    return plans
