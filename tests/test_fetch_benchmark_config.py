@@ -23,7 +23,7 @@ _spec.loader.exec_module(FSC)
 def _args(**over):
     base = dict(max_steps=300_000, flat_max_steps=1_200_000, rollout_ticks=0, algo="dqn",
                 num_envs=256, threshold=0.85, gamma=FSC.GAMMA, set=None,
-                hierarchy="paper_hold")
+                hierarchy="paper_hold", root_gamma=FSC.ROOT_GAMMA, sweep=None)
     return argparse.Namespace(**(base | over))
 
 
@@ -41,6 +41,14 @@ def test_default_rollouts_are_shorter_than_a_place_option(blocks, method):
     assert cfg.hierarchy == (None if method == "flat" else "paper_hold")
     # levels end on the frozen greedy policy, judged on whole episodes
     assert cfg.gate and cfg.gate_max_ticks >= 50 * blocks
+    # top-down's root looks further ahead than its skills (RESULTS 7.5); flat is unchanged
+    assert cfg.gamma == FSC.GAMMA
+    assert cfg.levels == ({} if method == "flat" else {"stack": {"gamma": FSC.ROOT_GAMMA}})
+
+
+def test_a_swept_gamma_leaves_the_root_no_gamma_of_its_own():
+    cfg = FSC.level_config(4, "top-down", _args(sweep=["gamma=0.96,0.99"]), dict(FSC.AGENT))
+    assert cfg.levels == {}
 
 
 def test_explicit_rollout_and_agent_override_win():

@@ -148,7 +148,7 @@ def test_per_level_budgets_and_thresholds():
 
 def test_per_level_overrides_are_checked():
     with pytest.raises(ConfigError, match="unknown field"):
-        TrainConfig(levels={"give_key": {"gamma": 0.5}})
+        TrainConfig(levels={"give_key": {"num_envs": 8}})
     with pytest.raises(ConfigError, match="threshold"):
         TrainConfig(levels={"give_key": {"threshold": 2.0}})
     with pytest.raises(ConfigError, match="does not train"):
