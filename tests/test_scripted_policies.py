@@ -135,6 +135,20 @@ def test_a_fully_scripted_hierarchy_opens_every_door_without_an_agent():
     assert first.all() and (success == 1.0).all()
 
 
+def test_the_engine_evaluates_a_scripted_hierarchy_with_nothing_learned():
+    from smjax.agents import make_agent
+    from smjax.train.config import TrainConfig
+    from smjax.train.engine import Engine
+
+    env, h = KeyDoor(), _scripted_keydoor()
+    cfg = TrainConfig(method="top-down", algo="ppo", num_envs=4, eval_envs=8)
+    engine = Engine(env, env.default_params, h, make_agent("ppo"), cfg)
+    bank = engine.new_bank(engine.init_learner(jax.random.split(jax.random.PRNGKey(0), 1)))
+    learned = jnp.zeros((1, h.num_options), bool)
+    result, _ = engine.evaluate(jax.random.split(jax.random.PRNGKey(1), 1), bank, learned)
+    assert float(result["completed"][0]) == 1.0 and float(result["success"][0]) == 1.0
+
+
 def test_a_teleport_comes_before_a_scripted_template_policy():
     h = _scripted_keydoor()
     states, _, _, carry = run(h, 1, teleport=True)
