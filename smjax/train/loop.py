@@ -82,8 +82,6 @@ def declared_identity(h: Hierarchy) -> dict:
                 "templates": sorted(h.templates)}
     if h.success is not None:  # only where declared, so older checkpoints still resume
         identity["success"] = getattr(h.success, "__qualname__", type(h.success).__name__)
-    if h.policies:  # likewise: which options decide by a script (not the functions)
-        identity["policies"] = sorted(h.policies)
     return identity
 
 
