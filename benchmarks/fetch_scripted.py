@@ -7,16 +7,22 @@ thread waiting, no progress, reproducible; 32 run fine, and so did 64 two-block 
 hence the CPU defaults of 32 environments and success episodes run in chunks of 32. On a
 GPU pass e.g. ``--num-envs 1024 8192 --chunk 1024``.
 
-For each --num-envs value it prints one JSON line with the throughput of
-``jit(vmap(scan(step_env)))`` (``--policy scripted`` (default): the scripted hierarchy
-picks the actions; ``random``: uniform actions; ``--steps`` steps per environment;
-compile time measured separately, steps/s = num_envs * steps / run time, median of
-``--repeats``). Then it plays ``--episodes`` full episodes (50 N steps) of the scripted
-hierarchy (``--levels 2``: stack -> place_i -> reach/pick/release, the paper's hierarchy;
-``--levels 1``: stack -> place_i controllers) and prints the success rate: the fraction
-of episodes whose final state has every block within 0.04 m of its goal. ``--epsilon 0 0.05``
-repeats the episodes with a root that explores (a random block's ``place_i`` with that
-probability at each level-1 choice).
+The scripted hierarchy is the catalogue's ``scripted`` one (``--levels 2``: stack ->
+place_i -> reach/pick/release, the paper's hierarchy, every choice a scripted policy of
+``smjax/envs/fetch/policies.py``) or ``scripted_root`` (``--levels 1``: stack -> place_i
+controllers), played by the hierarchical runner itself (``HierarchyRunner`` without an
+agent: nobody learns, nothing is learned, every decision is scripted).
+
+For each --num-envs value it prints one JSON line with the throughput of ``--steps``
+ticks per environment (``--policy scripted`` (default): the runner plays the scripted
+hierarchy (``--levels``), so this includes the runner's tick; ``random``:
+``jit(vmap(scan(step_env)))`` with uniform actions; compile time measured separately,
+steps/s = num_envs * steps / run time, median of ``--repeats``). Then it plays
+``--episodes`` full episodes (50 N steps) of the scripted hierarchy and prints the
+success rate: the fraction of episodes whose final state has every block within 0.04 m of
+its goal, and their mean final score. ``--epsilon 0 0.05`` repeats the episodes with a
+root that explores (a random block's ``place_i`` with that probability at each of its
+choices).
 """
 from __future__ import annotations
 
@@ -30,30 +36,65 @@ import jax.numpy as jnp
 import numpy as np
 
 import smjax
-from smjax.envs.fetch.scripted import rollout
+from smjax.envs.fetch.dynamics import score as fetch_score
+from smjax.envs.fetch.templates import scripted_hierarchy
+from smjax.options.runner import NO_OPTION, Controls, HierarchyRunner
+
+
+def scripted_runner(env, params, levels: int = 2, epsilon: float = 0.0):
+    """(runner, controls) that play the scripted hierarchy: no agent, no teleports."""
+    h = scripted_hierarchy(env, levels, epsilon)
+    runner = HierarchyRunner(env, params, h, None, gamma=1.0, allow_teleport=False)
+    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0),
+                        jnp.zeros((h.num_options,), bool))
+    return runner, controls
+
+
+def play(runner, controls, key: jax.Array, num_envs: int, ticks: int):
+    """``ticks`` ticks of ``num_envs`` environments from resets (auto-reset by the runner).
+
+    Returns (score [B, T], task_end [B, T]): the fraction of blocks in place after each
+    tick (at an episode's last tick its reported score, 0 where physics diverged) and
+    whether an episode ended there. Jit it (``num_envs`` and ``ticks`` static)."""
+    n = runner.env.num_blocks
+    k_reset, k_run = jax.random.split(key)
+    carry = runner.reset(k_reset, controls, num_envs)
+
+    def tick(c, k):
+        c, tr, ends = runner.tick(c, k, None, None, controls)
+        # nobody learns: the root's reward is the environment's, -(blocks not in place)
+        score = jnp.where(ends.reset, ends.task_success, fetch_score(tr.reward, n))
+        return c, (score, ends.task_end)
+
+    _, (score, end) = jax.lax.scan(tick, carry, jax.random.split(k_run, ticks))
+    return score.T, end.T
 
 
 def throughput(env, params, num_envs: int, steps: int, repeats: int, seed: int,
-               policy: str = "scripted") -> dict:
-    def one_env(key):
-        if policy == "scripted":
-            return rollout(env, key, params, steps, levels=2)[1]
-        key_reset, key_run = jax.random.split(key)
-        _, state = env.reset_env(key_reset, params)
+               policy: str = "scripted", levels: int = 2) -> dict:
+    if policy == "scripted":
+        runner, controls = scripted_runner(env, params, levels)
 
-        def tick(state, k):
-            action = jax.random.uniform(k, (4,), minval=-1.0, maxval=1.0)
-            _, state, reward, *_ = env.step_env(k, state, action, params)
-            return state, reward
+        def run(key):
+            return play(runner, controls, key, num_envs, steps)[0]
+    else:
+        def one_env(key):
+            key_reset, key_run = jax.random.split(key)
+            _, state = env.reset_env(key_reset, params)
 
-        _, rewards = jax.lax.scan(tick, state, jax.random.split(key_run, steps))
-        return rewards
+            def tick(state, k):
+                action = jax.random.uniform(k, (4,), minval=-1.0, maxval=1.0)
+                _, state, reward, *_ = env.step_env(k, state, action, params)
+                return state, reward
 
-    # Random actions at 64 environments hung inside XLA:CPU on the 2-core test machine
-    # (all threads waiting, no progress; not investigated further), so the default policy
-    # is the scripted hierarchy, which is also the workload of template execution.
-    def run(key):
-        return jax.vmap(one_env)(jax.random.split(key, num_envs))
+            _, rewards = jax.lax.scan(tick, state, jax.random.split(key_run, steps))
+            return rewards
+
+        # Random actions at 64 environments hung inside XLA:CPU on the 2-core test machine
+        # (all threads waiting, no progress; not investigated further), so the default
+        # policy is the scripted hierarchy, which is also the workload of template execution.
+        def run(key):
+            return jax.vmap(one_env)(jax.random.split(key, num_envs))
 
     fn = jax.jit(run)
     t0 = time.perf_counter()
@@ -70,30 +111,42 @@ def throughput(env, params, num_envs: int, steps: int, repeats: int, seed: int,
             "compile_seconds": compile_s, "device": jax.devices()[0].platform}
 
 
+def first_episodes(score: np.ndarray, end: np.ndarray) -> dict:
+    """Per environment, its first episode's final score, whether it ended with every
+    block in place, whether it ever had them all in place, and when that first happened
+    (score, end: [B, T]; an environment whose episode never ended counts its last tick;
+    ``first`` is -1 where it never had them all)."""
+    T = score.shape[1]
+    last = np.where(end.any(1), np.argmax(end, 1), T - 1)
+    final = score[np.arange(score.shape[0]), last]
+    within = np.arange(T)[None, :] <= last[:, None]
+    stacked = (score >= 1.0) & within
+    first = np.where(stacked.any(1), np.argmax(stacked, 1), -1)
+    return {"final": final, "success": final >= 1.0, "ever": stacked.any(1), "first": first}
+
+
 def scripted_success(env, params, episodes: int, levels: int, seed: int, chunk: int,
                      epsilon: float = 0.0) -> dict:
     horizon = int(params.max_steps)
-    fn = jax.jit(jax.vmap(lambda k: rollout(env, k, params, horizon, levels, epsilon)))
-    keys = jax.random.split(jax.random.PRNGKey(seed), episodes)
-    successes, scores = [], []
+    runner, controls = scripted_runner(env, params, levels, epsilon)
+    fn = jax.jit(lambda k: play(runner, controls, k, chunk, horizon))
+    finals, successes, evers, firsts = [], [], [], []
     t0 = time.perf_counter()
-    for start in range(0, episodes, chunk):  # equal-sized chunks reuse one compiled program
-        batch = keys[start:start + chunk]
-        if batch.shape[0] < chunk:
-            batch = jnp.concatenate([batch, keys[:chunk - batch.shape[0]]])
-        _, _, info = fn(batch)
+    for c, start in enumerate(range(0, episodes, chunk)):  # equal chunks: one compiled program
+        score, end = fn(jax.random.fold_in(jax.random.PRNGKey(seed), c))
+        out = first_episodes(np.asarray(score), np.asarray(end))
         take = min(chunk, episodes - start)
-        successes.append(np.asarray(info["is_success"])[:take])
-        scores.append(np.asarray(info["score"])[:take])
+        finals.append(out["final"][:take]), successes.append(out["success"][:take])
+        evers.append(out["ever"][:take]), firsts.append(out["first"][:take])
     seconds = time.perf_counter() - t0
-    success, score = np.concatenate(successes), np.concatenate(scores)
-    first = [int(np.argmax(s)) for s in success if s.any()]
+    firsts = np.concatenate(firsts)
+    firsts = firsts[firsts >= 0]
     return {"env": env.name, "levels": levels, "epsilon": epsilon, "episodes": episodes,
             "horizon": horizon,
-            "success_rate": float(success[:, -1].mean()),
-            "ever_success_rate": float(success.any(axis=1).mean()),
-            "final_score": float(score[:, -1].mean()),
-            "median_steps_to_first_success": float(np.median(first)) if first else None,
+            "success_rate": float(np.concatenate(successes).mean()),
+            "ever_success_rate": float(np.concatenate(evers).mean()),
+            "final_score": float(np.concatenate(finals).mean()),
+            "median_steps_to_first_success": float(np.median(firsts)) if firsts.size else None,
             "seconds_with_compile": seconds}
 
 
@@ -125,7 +178,7 @@ def main(argv=None) -> None:
     for n in args.num_envs:
         if args.steps > 0:
             print(json.dumps(throughput(env, params, n, args.steps, args.repeats, args.seed,
-                                        args.policy)), flush=True)
+                                        args.policy, args.levels)), flush=True)
     for epsilon in args.epsilon if args.episodes > 0 else []:
         print(json.dumps(scripted_success(env, params, args.episodes, args.levels, args.seed,
                                           min(args.chunk, args.episodes), epsilon)), flush=True)

@@ -129,20 +129,32 @@ def test_paper_hold_hierarchy_idles_only_once_the_tower_stands():
 
 
 def test_scripted_root_explores_only_among_blocks_not_in_place():
-    from smjax.envs.fetch.scripted import init_script_state, scripted_action
+    from smjax.envs.fetch.policies import stack_policy
+    from smjax.envs.fetch.templates import scripted_hierarchy
 
     env, params = smjax.make("fetch/stack3")
     _, state = jax.jit(env.reset_env)(jax.random.PRNGKey(1), params)
     state = _pose(state, blocks=state.goals[:1])              # block 0 on its goal
+    templates = env.templates()
+    h = env.hierarchies()["scripted"]
+    # the root's mask: place_i while block i is not in place, noop always
+    mask = jnp.stack([templates[c].initiation(state, params) for c in h.children["stack"]])
+    np.testing.assert_array_equal(np.asarray(mask), [False, True, True, True])
 
     @jax.jit
-    def first_choice(keys, epsilon):
-        return jax.vmap(lambda k: scripted_action(state, params, init_script_state(), 2, k,
-                                                  epsilon)[1].block)(keys)
+    def first_choice(keys, mask):
+        return {eps: jax.vmap(lambda k: stack_policy(3, eps)(k, state, params, mask))(keys)
+                for eps in (0.0, 1.0)}
 
     keys = jax.random.split(jax.random.PRNGKey(2), 64)
-    np.testing.assert_array_equal(np.asarray(first_choice(keys, 0.0)), 1)  # the lowest unplaced
-    explored = np.asarray(first_choice(keys, 1.0))
-    assert set(explored.tolist()) == {1, 2}                   # never block 0, which is in place
+    choice = first_choice(keys, mask)
+    np.testing.assert_array_equal(np.asarray(choice[0.0]), 1)  # the lowest unplaced
+    assert set(np.asarray(choice[1.0]).tolist()) == {1, 2}    # never block 0, which is in place
+    done = jnp.asarray([False, False, False, True])           # every block in place: noop
+    np.testing.assert_array_equal(np.asarray(first_choice(keys, done)[1.0]), 3)
     with pytest.raises(ValueError, match="epsilon"):
-        scripted_action(state, params, init_script_state(), 2, keys[0], 1.5)
+        stack_policy(3, 1.5)
+    with pytest.raises(ValueError, match="levels"):
+        scripted_hierarchy(env, 3)
+    assert set(h.scripted) == {"stack", "place_0", "place_1", "place_2"}
+    assert env.hierarchies()["scripted_root"].scripted == ("stack",)

@@ -11,6 +11,15 @@ Indices used by the compiled machinery:
 * options: 0 is the root, ``1..T`` the templates in top-down (breadth-first) order;
 * actions: ``0..P-1`` the primitive actions, ``P + j - 1`` a call of template ``j``.
 
+An option with children may have a **scripted policy** (``policies``): a pure function
+``policy(key, state, params, mask) -> int``, the index of the child it calls (into
+``children[option]``), given the environment's state and ``mask``, bool [num_children]:
+the children it may call now (initiation and realisability). It decides for that option
+wherever nothing learned does: the option's own learner and its frozen policy (once
+learned) come first. Like a controller, it gives way to the option's teleport where
+teleports are on. A hierarchy whose every option with children has one is played
+entirely by hand (evaluation needs no agent: ``HierarchyRunner(..., agent=None)``).
+
 The root's success (what the trainer's threshold and ``final_success`` measure) is, in
 this order: the hierarchy's declared ``success(state, params)`` evaluated on the state an
 episode ends in, the environment's ``info["success"]`` where it reports one, else the
@@ -44,6 +53,9 @@ class Hierarchy:
     #: ``success(state, params)`` -> a scalar float in [0, 1] or a bool (None: the
     #: environment's ``info["success"]``, else the episode return).
     success: Callable[[Any, Any], Any] | None = None
+    #: option name -> scripted policy ``policy(key, state, params, mask) -> int`` child
+    #: index (pure and jittable; see the module docstring). None: no scripted policies.
+    policies: Mapping[str, Callable[[Any, Any, Any, Any], Any]] | None = None
     # derived on construction
     option_names: tuple[str, ...] = field(init=False)
     depth_of: Mapping[str, int] = field(init=False)
@@ -73,11 +85,14 @@ class Hierarchy:
                 raise HierarchyError(f"template registered as {name!r} is named {tpl.name!r}")
         expanded = {p: tuple(self._expand(p, kids)) for p, kids in self.children.items()}
         object.__setattr__(self, "children", expanded)
+        object.__setattr__(self, "policies", self._check_policies(self.policies))
         order, depth = self._walk()
         object.__setattr__(self, "option_names", tuple(order))
         object.__setattr__(self, "depth_of", depth)
         for name in order[1:]:
             tpl = self.templates[name]
+            if name in self.policies:  # it decides by its script: nothing else is needed
+                continue
             if not tpl.realisable and not self.children.get(name):
                 raise HierarchyError(
                     f"template {name!r} has no way to be realised: no teleport, no controller "
@@ -90,6 +105,23 @@ class Hierarchy:
                 )
 
     # ---- construction helpers ------------------------------------------
+    def _check_policies(self, policies) -> dict:
+        if policies is None:
+            return {}
+        if not isinstance(policies, Mapping):
+            raise HierarchyError(f"policies must map option names to scripted policies, got "
+                                 f"{type(policies).__name__}")
+        for name, fn in policies.items():
+            if not isinstance(name, str) or name not in self.children:
+                raise HierarchyError(
+                    f"scripted policy for {name!r}, which is not an option with children; "
+                    f"options with children: {sorted(self.children)}")
+            if not callable(fn):
+                raise HierarchyError(
+                    f"scripted policy of {name!r} must be a function policy(key, state, "
+                    f"params, mask) -> child index, got {type(fn).__name__}")
+        return dict(policies)
+
     def _expand(self, parent: str, kids: Sequence[str]) -> list[str]:
         if isinstance(kids, str) or not isinstance(kids, Sequence):
             raise HierarchyError(
@@ -194,6 +226,11 @@ class Hierarchy:
         return tuple(n for n in self.option_names if self.children.get(n))
 
     @property
+    def scripted(self) -> tuple[str, ...]:
+        """Options with a scripted policy, in option order."""
+        return tuple(n for n in self.option_names if n in self.policies)
+
+    @property
     def template_list(self) -> tuple[OptionTemplate, ...]:
         return tuple(self.templates[n] for n in self.option_names[1:])
 
@@ -210,20 +247,26 @@ class Hierarchy:
         for name in self.option_names:
             kids = self.children.get(name)
             what = ", ".join(kids) if kids else "(leaf: teleport/controller only)"
+            if name in self.policies:
+                what += " [scripted policy]"
             lines.append(f"level {self.level(name)}: {name} -> {what}")
         return "\n".join(lines)
 
 
 def declare(env, task: str, children: Mapping[str, Sequence[str]], *,
             templates: Mapping[str, OptionTemplate] | Sequence[OptionTemplate] | None = None,
-            success: Callable[[Any, Any], Any] | None = None) -> Hierarchy:
+            success: Callable[[Any, Any], Any] | None = None,
+            policies: Mapping[str, Callable[[Any, Any, Any, Any], Any]] | None = None
+            ) -> Hierarchy:
     """Build a validated hierarchy over an environment's templates and primitive actions.
 
     ``templates``: templates of your own (a name -> template mapping or a list), added to
     the environment's (one with the name of an environment template replaces it).
     ``success(state, params)``: the task's success of an episode ending in ``state`` (a
     float in [0, 1] or a bool), where it is not the environment's ``info["success"]`` or
-    the episode return."""
+    the episode return.
+    ``policies``: option name -> scripted policy ``policy(key, state, params, mask)`` ->
+    the index of the child to call (see the module docstring)."""
     own = dict(env.templates())
     if templates is not None:
         items = templates.values() if isinstance(templates, Mapping) else templates
@@ -242,6 +285,7 @@ def declare(env, task: str, children: Mapping[str, Sequence[str]], *,
         templates=own,
         primitive_names=tuple(env.primitive_action_names),
         success=success,
+        policies=policies,
     )
 
 

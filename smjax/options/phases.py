@@ -40,6 +40,14 @@ class Decision(NamedTuple):
     learner_decided: jax.Array  # bool: the learner chose in this tick
 
 
+def deciding_options(learned: jax.Array, has_policy: jax.Array, has_teleport: jax.Array,
+                     teleport_on: jax.Array | bool) -> jax.Array:
+    """bool [O]: options that choose among their children when on the stack (besides the
+    learner): the learned ones, and those with a scripted policy unless teleported instead
+    (a scripted policy, like a controller, gives way to a teleport where teleports are on)."""
+    return learned | (has_policy & ~(has_teleport & teleport_on))
+
+
 def pushable_options(learned: jax.Array, learner: jax.Array, has_controller: jax.Array,
                      has_teleport: jax.Array, teleport_on: jax.Array | bool) -> jax.Array:
     """bool [O]: options that go on the stack when called: learned ones, the learner, and
@@ -53,10 +61,11 @@ def decide(stack: ExecutionStack, frozen_choice: jax.Array, learner_choice: jax.
            num_primitives: int) -> Decision:
     """Walk down from the stack top until a primitive step is fixed (one environment).
 
-    ``frozen_choice [O]``: what each frozen policy picks now (action ids: primitives
-    first, then templates); ``learner_choice``: the learner's pick. A learned option or
-    the learner chooses; an unlearned option on the stack plays its script (the walk
-    stops there). A chosen template is pushed (``pushable & callable_``; the walk goes on
+    ``frozen_choice [O]``: what each frozen (or scripted) policy picks now (action ids:
+    primitives first, then templates); ``learner_choice``: the learner's pick.
+    ``learned``: the options that choose (``deciding_options``: learned, or with a
+    scripted policy). A learned option or the learner chooses; an unlearned option on the
+    stack plays its script (the walk stops there). A chosen template is pushed (``pushable & callable_``; the walk goes on
     one level deeper) or else teleported (the walk stops). The stack is at most its
     capacity deep, so that many steps always reach a decision.
     """

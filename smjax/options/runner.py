@@ -3,7 +3,9 @@
 In each tick, for each environment, options on the execution stack decide from the top
 down until a primitive action is fixed: the learner (the option being trained) samples
 from its own policy, learned options use their frozen policy from the *policy bank*, an
-unlearned template on the stack plays its scripted controller, and calling an
+option with a scripted policy (``Hierarchy.policies``) that is neither learned nor the
+learner decides by its script, an unlearned template on the stack plays its scripted
+controller, and calling an
 unlearned template that has a teleport jumps the state (the jump and its primitive
 action are that tick's single environment step). After the step, every stack entry
 whose template is satisfied or out of ticks is popped (with everything above it).
@@ -82,6 +84,12 @@ class HierarchyRunner:
         self.action_dtype = space.dtype
         self.teleport_families = families([t.teleport for t in tpls])
         self.controller_families = families([t.controller for t in tpls])
+        # scripted policies: (option id, policy, its children's action ids)
+        self.policies = [(hierarchy.option_index(name), hierarchy.policies[name],
+                          np.asarray([hierarchy.action_index(c) for c in hierarchy.children[name]],
+                                     np.int32))
+                         for name in hierarchy.scripted]
+        self.has_policy = np.array([n in hierarchy.policies for n in hierarchy.option_names])
 
     # ---- per-environment template evaluations (unbatched) ------------------
     def _per_option(self, state, field: str, root, dtype) -> jax.Array:
@@ -107,6 +115,14 @@ class HierarchyRunner:
         """bool: unlearned templates with a teleport jump (else they are not callable)."""
         allowed = jnp.asarray(self.allow_teleport)
         return allowed if controls.teleport is None else allowed & controls.teleport
+
+    def deciding(self, learned: jax.Array, teleport_on: jax.Array | bool) -> jax.Array:
+        """bool [num_options]: options that choose when on the stack (besides the learner):
+        the learned ones, and those with a scripted policy (``phases.deciding_options``)."""
+        if not self.policies:  # as before scripted policies existed: the same program
+            return learned
+        return phases.deciding_options(learned, jnp.asarray(self.has_policy),
+                                       jnp.asarray(self.has_teleport), teleport_on)
 
     def callable_options(self, learned: jax.Array, learner: jax.Array,
                          teleport: jax.Array | bool | None = None) -> jax.Array:
@@ -166,18 +182,21 @@ class HierarchyRunner:
 
         ``learner_state`` is what the agent's ``act`` takes; in ``learner_acts_frozen`` mode
         only its ``params`` are read, and it may be None where nobody learns
-        (``controls.learner`` is NO_OPTION: evaluation needs no learner).
+        (``controls.learner`` is NO_OPTION: evaluation needs no learner). A runner built
+        without an agent (``agent=None``: every decision scripted) takes None for
+        ``learner_state`` and ``bank_params``, nobody learns and nothing is learned.
         """
         k_act, k_frozen, k_ctrl, k_tp, k_step, k_reset = jax.random.split(key, 6)
         teleport_on = self.teleports_on(controls)
-        callable_ = self.callable_options(controls.learned, controls.learner, teleport_on)
+        deciding = self.deciding(controls.learned, teleport_on)
+        callable_ = self.callable_options(deciding, controls.learner, teleport_on)
         act, learner_mask, frozen = self._choices(carry, learner_state, bank_params, controls,
                                                   callable_, k_act, k_frozen)
         pushable = phases.pushable_options(
-            controls.learned, controls.learner, jnp.asarray(self.has_controller),
+            deciding, controls.learner, jnp.asarray(self.has_controller),
             jnp.asarray(self.has_teleport), teleport_on)
         decision = jax.vmap(lambda s, f, l: phases.decide(
-            s, f, l, learner=controls.learner, learned=controls.learned, pushable=pushable,
+            s, f, l, learner=controls.learner, learned=deciding, pushable=pushable,
             callable_=callable_, num_primitives=self.P))(carry.stack, frozen, act.action)
         state_in, action, teleported = self._realise(decision, carry.env_state, teleport_on,
                                                       k_ctrl, k_tp)
@@ -211,18 +230,44 @@ class HierarchyRunner:
                  callable_: jax.Array, k_act: jax.Array, k_frozen: jax.Array):
         """What each policy would pick now: the learner's act [B] (and its action mask
         [B, A]), and every frozen policy's masked pick [B, O] (read only where that option
-        is on the stack and learned)."""
+        is on the stack and decides), a scripted policy's where its option is not learned."""
         init_ok = jax.vmap(self._initiation)(carry.env_state)                     # [B, O]
         masks = jax.vmap(lambda i: self.action_masks(i, callable_))(init_ok)      # [B, O, A]
         learner_mask = masks[:, jnp.maximum(controls.learner, 0)]                 # [B, A]
-        if self.learner_acts_frozen:
-            act = self._act_frozen(learner_state, carry.obs, learner_mask, k_act, controls)
+        B = carry.obs.shape[0]
+        if self.agent is None:  # every decision scripted: no network runs
+            zeros = jnp.zeros((B,), jnp.float32)
+            act = ActOutput(jnp.zeros((B,), jnp.int32), zeros, zeros)
+            frozen = jnp.zeros((B, self.h.num_options), jnp.int32)
         else:
-            act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
-        logits = self.frozen_logits(bank_params, carry.obs, controls)             # [O, B, A]
-        logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
-        frozen = self._frozen_pick(logits, k_frozen, controls)
-        return act, learner_mask, jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)
+            if self.learner_acts_frozen:
+                act = self._act_frozen(learner_state, carry.obs, learner_mask, k_act, controls)
+            else:
+                act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
+            logits = self.frozen_logits(bank_params, carry.obs, controls)         # [O, B, A]
+            logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
+            frozen = self._frozen_pick(logits, k_frozen, controls)
+            frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)
+        if self.policies:
+            # its own key stream, so that hierarchies without scripted policies keep theirs
+            keys = jax.random.split(jax.random.fold_in(k_frozen, 0x5C41), B)
+            picks = jax.vmap(self._scripted_picks)(keys, carry.env_state, masks)  # [B, n]
+            for j, (option, _, _) in enumerate(self.policies):
+                frozen = frozen.at[:, option].set(
+                    jnp.where(controls.learned[option], frozen[:, option], picks[:, j]))
+        return act, learner_mask, frozen
+
+    def _scripted_picks(self, key: jax.Array, state, masks: jax.Array) -> jax.Array:
+        """int32 [len(policies)]: each scripted policy's pick as an action id (one
+        environment; ``masks`` [O, A]). A policy gets its children's mask and returns a
+        child index (clipped into range)."""
+        out = []
+        for option, policy, ids in self.policies:
+            mask = masks[option][ids]
+            child = jnp.asarray(policy(jax.random.fold_in(key, option), state, self.env_params,
+                                       mask)).reshape(())
+            out.append(jnp.asarray(ids)[jnp.clip(child, 0, len(ids) - 1)])
+        return jnp.stack(out).astype(jnp.int32)
 
     def _realise(self, decision: phases.Decision, env_state, teleport_on: jax.Array,
                  k_ctrl: jax.Array, k_tp: jax.Array):

@@ -33,6 +33,7 @@ import jax.numpy as jnp
 from smjax.envs.fetch import controllers as ctl
 from smjax.envs.fetch import types as st
 from smjax.envs.fetch.dynamics import blocks_placed
+from smjax.envs.fetch.policies import place_policy, stack_policy
 from smjax.options import OptionTemplate, always, declare
 
 K_MAX = {"place": 80, "reach": 30, "pick": 50, "release": 30, "noop": 1}
@@ -134,6 +135,8 @@ def make_hierarchies(env) -> dict:
     do-nothing at all (``place_i`` runs only while block i is not in place).
     ``root_only``: ``paper_hold``'s root over scripted ``place_i`` leaves, so only the root
     learns (a quick way to study the root apart: a top-down run is one level).
+    ``scripted``: ``paper`` with every decision scripted (``scripted_hierarchy``);
+    ``scripted_root``: the root scripted over ``place_i`` leaves (their controllers).
     """
     n = env.num_blocks
     places = [f"place_{i}" for i in range(n)]
@@ -148,4 +151,21 @@ def make_hierarchies(env) -> dict:
     return {"paper": declare(env, "stack", paper), "flat": declare(env, "stack", flat),
             "paper_hold": declare(env, "stack", paper_hold),
             "paper_hold_all": declare(env, "stack", paper_hold_all),
-            "root_only": declare(env, "stack", {"stack": places + ["hold"]})}
+            "root_only": declare(env, "stack", {"stack": places + ["hold"]}),
+            "scripted": scripted_hierarchy(env), "scripted_root": scripted_hierarchy(env, 1)}
+
+
+def scripted_hierarchy(env, levels: int = 2, epsilon: float = 0.0):
+    """The paper's hierarchy played by hand (``policies.py``): ``levels=2``: stack ->
+    place_i -> reach_i / pick_i / release_i, every choice scripted; ``levels=1``: stack ->
+    place_i, whose controllers act. ``epsilon``: the root explores (``stack_policy``)."""
+    if levels not in (1, 2):
+        raise ValueError(f"levels must be 1 or 2, got {levels!r}")
+    n = env.num_blocks
+    children = {"stack": [f"place_{i}" for i in range(n)] + ["noop"]}
+    policies = {"stack": stack_policy(n, epsilon)}
+    if levels == 2:
+        for i in range(n):
+            children[f"place_{i}"] = [f"reach_{i}", f"pick_{i}", f"release_{i}", "noop"]
+            policies[f"place_{i}"] = place_policy
+    return declare(env, "stack", children, policies=policies)
