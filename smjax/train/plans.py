@@ -47,6 +47,8 @@ def declared_identity(h: Hierarchy) -> dict:
                 "templates": sorted(h.templates)}
     if h.success is not None:  # only where declared, so older checkpoints still resume
         identity["success"] = getattr(h.success, "__qualname__", type(h.success).__name__)
+    if h.policies:  # scripted options (only where declared, as above)
+        identity["policies"] = sorted(h.policies)
     return identity
 
 
