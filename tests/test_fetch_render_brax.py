@@ -46,6 +46,7 @@ def test_render_returns_rgb_frame_showing_the_scene():
         env.render(jax.tree.map(lambda x: x[None], state), params)
 
 
+@pytest.mark.slow  # ~140 s on 2 cores; the adapter's contract is checked by the fast tests above
 def test_brax_adapter_runs_under_brax_training_wrapper():
     from brax.envs.base import Env
     from brax.envs.wrappers import training

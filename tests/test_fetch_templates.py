@@ -89,6 +89,7 @@ def test_templates_and_hierarchies_are_declared():
     np.testing.assert_array_equal(np.asarray(action), np.zeros(4))
 
 
+@pytest.mark.slow  # ~110 s on 2 cores; test_scripted_policies plays the controllers on stack2
 def test_controller_templates_terminate_fast():
     ok = _rates(16)
     # 16 resets: every template must terminate in at least 14 (the slow test holds 95 %).

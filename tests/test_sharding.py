@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 SCRIPT = """
 import json, sys
 sys.path.insert(0, {tests!r})
@@ -38,6 +40,7 @@ def test_seed_sharding_matches_single_device():
     assert four["final"] == one["final"]
 
 
+@pytest.mark.slow  # ~80 s on 2 cores; sharded == single-device is the fast test above
 def test_seeds_and_environments_sharded_together_run():
     # 2 seeds on 4 devices: each seed's 16 environments are split over 2 devices
     two = _run(4, [0, 1])
