@@ -110,3 +110,17 @@ def test_a_level_boundary_checkpoint_holds_the_next_level_and_resumes_exactly(tm
     assert _strip_timing(resumed) | {"config": None} == _strip_timing(straight) | {"config": None}
     assert resumed["config"] == straight["config"] | {"tensorboard": True, "checkpoint_every": 1e8}
     assert list((out / "tensorboard").glob("events.out.tfevents.*"))
+
+
+def test_arrays_of_another_layout_are_refused_as_such_not_as_corrupt(tmp_path):
+    """A checkpoint written by code whose trainer holds other arrays (e.g. a learner state
+    with more hyper-parameters) is intact: the error says so and does not suggest deleting it."""
+    import numpy as np
+
+    ckpt.save_checkpoint(tmp_path, 1, {"a": np.zeros(3), "b": np.ones(2)}, {"run": {}, "host": {}})
+    with pytest.raises(ckpt.CheckpointError, match="other arrays than this smjax"):
+        ckpt.load_arrays(tmp_path, {"a": np.zeros(3), "b": np.ones(2), "c": np.ones(1)})
+    with pytest.raises(ckpt.CheckpointError, match="other arrays than this smjax"):
+        ckpt.load_arrays(tmp_path, {"a": np.zeros(3)})
+    restored = ckpt.load_arrays(tmp_path, {"a": np.zeros(3), "b": np.zeros(2)})
+    assert float(restored["b"].sum()) == 2.0  # the same layout still restores

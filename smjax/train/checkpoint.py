@@ -289,6 +289,13 @@ def load_arrays(out_dir: str | Path, like: Any) -> Any:
     try:
         restored = _checkpointer().restore(path, abstract)
     except Exception as err:  # truncated or corrupt data: orbax chains a long traceback
+        said = str(err).lower()
+        if "structure" in said and "match" in said:  # intact, but laid out by other code
+            raise CheckpointError(
+                f"checkpoint data in {path} holds other arrays than this smjax's trainer has "
+                f"(it was written by another smjax version, e.g. a DQN run from before DQN's "
+                f"exploration and target settings became sweepable); resume it with the smjax "
+                f"version that wrote it, or train again in another directory") from None
         raise CheckpointError(f"checkpoint data in {path} cannot be read ({_first_line(err)}); "
                               f"it is truncated or corrupt: restore it or start again with "
                               f"--overwrite") from None
