@@ -45,12 +45,12 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     state has an inventory, the units of each item gained per option [O, K] (summed over
     first episodes; a gain counts for the option on top of the stack when the tick starts,
     so a call's first step counts for its caller; an episode's last step is not seen)."""
-    runner = engine.episode_runner
+    runner = engine.runner
     O = engine.h.num_options
 
     def one_seed(key, bank, learned, temperature):
         controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
-                            temperature=temperature)
+                            temperature=temperature, acts_frozen=True)  # nobody learns
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
         zeros = jnp.zeros((num_envs,), jnp.float32)

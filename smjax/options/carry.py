@@ -107,6 +107,11 @@ class Controls:
       decrease of its template's ``side_cost`` (None or 0: never; fine-tuning turns it on).
     gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs
       with different discounts share one compile (a sweep).
+    acts_frozen: a Python bool, not traced: the learner picks as the bank will run it once
+      frozen (greedy or sampled, no exploration; only its params are read) instead of
+      exploring through the agent's ``act``: the gate's and evaluation's mode (None: as
+      the runner was built). Static because the two modes read different learner state
+      (evaluation has none), so they cannot share one traced program.
     """
 
     learner: jax.Array
@@ -117,3 +122,4 @@ class Controls:
     temperature: jax.Array | None = None
     side_cost: jax.Array | None = None
     gamma: jax.Array | None = None
+    acts_frozen: bool | None = None

@@ -180,7 +180,8 @@ class HierarchyRunner:
              controls: Controls) -> tuple[EnvCarry, Transition, EpisodeEnds]:
         """One primitive step for every environment (leading axis B).
 
-        ``learner_state`` is what the agent's ``act`` takes; in ``learner_acts_frozen`` mode
+        ``learner_state`` is what the agent's ``act`` takes; where the learner acts frozen
+        (``Controls.acts_frozen``)
         only its ``params`` are read, and it may be None where nobody learns
         (``controls.learner`` is NO_OPTION: evaluation needs no learner). A runner built
         without an agent (``agent=None``: every decision scripted) takes None for
@@ -240,7 +241,7 @@ class HierarchyRunner:
             act = ActOutput(jnp.zeros((B,), jnp.int32), zeros, zeros)
             frozen = jnp.zeros((B, self.h.num_options), jnp.int32)
         else:
-            if self.learner_acts_frozen:
+            if self.acts_frozen(controls):
                 act = self._act_frozen(learner_state, carry.obs, learner_mask, k_act, controls)
             else:
                 act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
@@ -383,6 +384,11 @@ class HierarchyRunner:
         if controls.temperature is not None:
             return controls.temperature
         return 0.0 if self.frozen_policy == "greedy" else self.frozen_temperature
+
+    def acts_frozen(self, controls: Controls) -> bool:
+        """Whether the learner picks as it will once frozen (``Controls.acts_frozen``, else
+        as the runner was built)."""
+        return self.learner_acts_frozen if controls.acts_frozen is None else controls.acts_frozen
 
     def resets_on_learner_end(self, controls: Controls) -> jax.Array | bool:
         """Whether an environment is reset when the learner's option ends."""

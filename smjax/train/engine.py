@@ -72,18 +72,15 @@ class Engine:
         self.env, self.env_params, self.h, self.agent, self.cfg = env, env_params, hierarchy, agent, cfg
         mode = frozen_mode(cfg, agent)
         self.frozen_policy = mode
+        # One runner for training, the gate and evaluation; what differs is per call
+        # (``Controls``): the gate and evaluation run the learner as it will be frozen
+        # (``acts_frozen``), episodes that reset where the learner's option ends, and
+        # teleports as a traced switch (the gate: the level's own setting, teleports above,
+        # calls from resets; evaluation: the final product alone, no teleports, no
+        # learner; scripted leaf controllers run in both), so both share one program.
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                       frozen_policy=mode, allow_teleport=True,
-                                      reset_on_learner_end=not cfg.continue_episodes,
                                       reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval)
-        # Gate and evaluation share one runner and one compiled program: the learner acts
-        # as it will once frozen, and teleports are a traced switch (the gate: the level's
-        # own setting, teleports above, calls from resets; evaluation: the final product
-        # alone, no teleports, no learner; scripted leaf controllers run in both).
-        self.episode_runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
-                                              frozen_policy=mode, allow_teleport=True,
-                                              learner_acts_frozen=True,
-                                              reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval)
         obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
         self.example_obs = obs
         self.num_actions = hierarchy.num_actions
@@ -188,8 +185,9 @@ class Engine:
         decision, fewer ticks. The success then reported is the mean so far (unfinished
         episodes count 0), which lies on the same side of the threshold.
         ``temperature``: how frozen policies (and the learner) pick, 0 = greedy."""
-        runner = self.episode_runner
-        controls = Controls(learner, start, learned, teleport, temperature=temperature)
+        runner = self.runner
+        controls = Controls(learner, start, learned, teleport, continue_episodes=jnp.asarray(False),
+                            temperature=temperature, acts_frozen=True)
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
         on, pass_at, fail_below = decide

@@ -63,8 +63,9 @@ def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 5
         raise ValueError(f"seed_index must be in [0, {len(seeds)}), got {seed_index}")
     bank = jax.tree.map(lambda x: x[seed_index], bank)
     learned = learned[seed_index]
-    runner = engine.episode_runner
-    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False))
+    runner = engine.runner
+    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
+                        acts_frozen=True)  # nobody learns: no learner state to explore with
     key = jax.random.PRNGKey(0) if key is None else key
     key, k_reset, _ = jax.random.split(key, 3)  # (the third key once made a dummy learner)
     carry = runner.reset(k_reset, controls, 1)
