@@ -83,6 +83,22 @@ def test_the_policy_sees_its_childrens_mask():
     np.testing.assert_array_equal(np.asarray(states[1].pos), np.where(at_door, 3, 4))
 
 
+def test_a_forbidden_pick_becomes_the_first_allowed_child():
+    env = KeyDoor()
+    # the script always calls reach_door, which is not initiable at the door: there the
+    # runner takes the first allowed child instead ("left"); elsewhere the script is obeyed
+    h = declare(env, "open_door", {"open_door": ["reach_door", "left", "use"]},
+                policies={"open_door": always(0)})
+    states, _, _, carry = run(h, 1, start_pos=4)
+    at_door = np.asarray(states[0].door_pos) == 4
+    assert at_door.any() and not at_door.all()
+    np.testing.assert_array_equal(np.asarray(states[1].pos)[at_door], 3)
+    called = np.asarray(carry.stack.option)[:, 1] == h.option_index("reach_door")
+    assert not called[at_door].any()
+    moved_right = np.asarray(states[1].pos)[~at_door] == 5
+    assert (called[~at_door] | moved_right).all()
+
+
 def test_the_learners_own_option_ignores_its_scripted_policy():
     env = KeyDoor()
     h = declare(env, "open_door", {"open_door": ["primitives"]},

@@ -261,13 +261,17 @@ class HierarchyRunner:
     def _scripted_picks(self, key: jax.Array, state, masks: jax.Array) -> jax.Array:
         """int32 [len(policies)]: each scripted policy's pick as an action id (one
         environment; ``masks`` [O, A]). A policy gets its children's mask and returns a
-        child index (clipped into range)."""
+        child index, clipped into range; a pick the mask forbids becomes the first allowed
+        child, so a script can never call what a learned policy could not (an option
+        that is not initiable, or not realisable now)."""
         out = []
         for option, policy, ids in self.policies:
             mask = masks[option][ids]
             child = jnp.asarray(policy(jax.random.fold_in(key, option), state, self.env_params,
                                        mask)).reshape(())
-            out.append(jnp.asarray(ids)[jnp.clip(child, 0, len(ids) - 1)])
+            child = jnp.clip(child, 0, len(ids) - 1)
+            child = jnp.where(mask[child], child, jnp.argmax(mask))
+            out.append(jnp.asarray(ids)[child])
         return jnp.stack(out).astype(jnp.int32)
 
     def _realise(self, decision: phases.Decision, env_state, teleport_on: jax.Array,

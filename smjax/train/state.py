@@ -48,9 +48,22 @@ def append_window(history: list, total: float, count: int, window: int) -> float
     return total / seen if seen >= window else None
 
 
-class _Gated:
+class _Counters:
     """Counters of gate attempts (``gate_success``, ``gate_attempts``, ``gate_env_steps``,
-    ``gate_next``: the first chunk at which the next attempt may run)."""
+    ``gate_next``: the first chunk at which the next attempt may run), and of a chunk's
+    updates (``episodes``, ``env_steps``, a running-success window)."""
+
+    def _count(self, history: list, episodes, success, counted, steps_per_update: int,
+               window: int) -> list[tuple[int, int, float | None]]:
+        """Per update (environment episodes, summed success, the episodes it counts):
+        count it, add it to ``history``; (episodes, env_steps, running success) after it."""
+        rows = []
+        for e, total, n in zip(episodes, success, counted):
+            self.episodes += int(e)
+            self.env_steps += steps_per_update
+            rows.append((self.episodes, self.env_steps,
+                         append_window(history, float(total), int(n), window)))
+        return rows
 
     def record_gate(self, result: dict, s: int, next_chunk: int) -> float:
         """Count seed ``s``'s attempt (``result``: the episodes program's, gathered); its
@@ -63,7 +76,7 @@ class _Gated:
 
 
 @dataclass
-class LevelCounters(_Gated):
+class LevelCounters(_Counters):
     """One seed's counters in the level (or fine-tuning turn) it trains."""
     episodes: int = 0
     env_steps: int = 0
@@ -79,17 +92,14 @@ class LevelCounters(_Gated):
               window: int) -> list[tuple[int, int, float | None]]:
         """Count a chunk's updates (per update: environment episodes, the learner's summed
         success and its episodes); per update, (episodes, env_steps, running) after it."""
-        rows = []
-        for e, total, n in zip(episodes, success, learner_episodes):
-            self.episodes += int(e)
-            self.env_steps += steps_per_update
-            self.running = append_window(self.history, float(total), int(n), window)
-            rows.append((self.episodes, self.env_steps, self.running))
+        rows = self._count(self.history, episodes, success, learner_episodes, steps_per_update,
+                           window)
+        self.running = rows[-1][2] if rows else self.running
         return rows
 
 
 @dataclass
-class FinetuneCounters(_Gated):
+class FinetuneCounters(_Counters):
     """One seed's fine-tuning counters (its phase, over all its turns)."""
     turn: int = 0               # turns started (the option is the turn's, round robin)
     episodes: int = 0           # environment episodes of the phase's training chunks
@@ -108,12 +118,9 @@ class FinetuneCounters(_Gated):
               window: int) -> list[tuple[int, int, float | None]]:
         """Count a fine-tuning chunk's updates; per update, (episodes, env_steps,
         task_running) after it."""
-        rows = []
-        for e, total, n in zip(episodes, success, task_episodes):
-            self.episodes += int(e)
-            self.env_steps += steps_per_update
-            self.task_running = append_window(self.task_history, float(total), int(n), window)
-            rows.append((self.episodes, self.env_steps, self.task_running))
+        rows = self._count(self.task_history, episodes, success, task_episodes,
+                           steps_per_update, window)
+        self.task_running = rows[-1][2] if rows else self.task_running
         return rows
 
 
