@@ -49,6 +49,16 @@ def trained(tmp_path_factory):
     return env, params, h, out, res
 
 
+def test_the_flat_method_trains_a_declared_hierarchys_flattening():
+    env, params = make_keydoor()
+    h = declare(env, "open_door", {"open_door": ["give_key", "reach_door", "use"],
+                                   "give_key": ["primitives"]})
+    cfg = KEYDOOR_CFG.replace(method="flat", max_episodes_per_level=100)
+    res = run((env, params), cfg, [0], progress=False, hierarchy=h)
+    assert res["config"]["hierarchy_used"] == "declared:open_door:flattened"
+    assert [lv["template"] for lv in res["levels"]] == ["open_door"]
+
+
 def test_a_declared_hierarchy_trains_and_is_named_in_the_results(trained):
     env, params, h, out, res = trained
     assert res["config"]["hierarchy_used"] == "declared:open_door"
@@ -82,9 +92,6 @@ def test_a_craft_hierarchy_declared_inline_trains_and_plays_back(tmp_path):
 
 def test_bad_hierarchy_arguments_are_refused_before_training(tmp_path):
     env, _ = smjax.make("craft/make_stick", **ENV)
-    with pytest.raises(ConfigError, match="flat method"):
-        run("craft/make_stick", CFG.replace(method="flat"), [0], env_overrides=ENV,
-            progress=False, hierarchy=_two_levels(env))
     with pytest.raises(ConfigError, match="a name or a smjax.options.Hierarchy"):
         run("craft/make_stick", CFG, [0], env_overrides=ENV, progress=False,
             hierarchy={"make_stick": ["give_wood"]})

@@ -27,6 +27,36 @@ def test_leaf_templates_are_not_learnable():
     assert h.child_mask()[0].tolist() == [False, False, True, True, True]
 
 
+def test_flattening_is_one_level_over_the_leaves_deepest_first():
+    env = KeyDoor()
+    h = declare(env, "open_door", {"open_door": ["give_key", "reach_door", "use"],
+                                   "give_key": ["primitives"]},
+                success=_sat, policies={"give_key": lambda k, s, p, m: 0})
+    flat = h.flattened()
+    # give_key has children: replaced by them; reach_door is a leaf; primitives come first
+    assert flat.option_names == ("open_door", "reach_door")
+    assert flat.children == {"open_door": ("left", "right", "use", "reach_door")}
+    assert flat.learnable == ("open_door",) and flat.stack_depth == 2
+    assert flat.success is _sat and flat.policies == {}
+    assert flat.flattened() == flat  # flattening is idempotent
+    # without primitives anywhere, none are added
+    deep = declare(env, "open_door", {"open_door": ["give_key", "reach_door"],
+                                      "give_key": ["reach_door"]}).flattened()
+    assert deep.children == {"open_door": ("reach_door",)} and deep.num_primitives == 0
+
+
+@pytest.mark.parametrize("task", ["craft/get_gem", "craft/make_stick", "fetch/stack3",
+                                  "football/11v11_easy"])
+def test_every_catalogue_flat_is_its_default_hierarchys_flattening(task):
+    import smjax
+
+    env, _ = smjax.make(task)
+    hierarchies = env.hierarchies()
+    default = next(iter(hierarchies.values())).flattened()
+    assert default.children == hierarchies["flat"].children
+    assert default.option_names == hierarchies["flat"].option_names
+
+
 @pytest.mark.parametrize("children, message", [
     ({"open_door": ["give_key", "jump"]}, "unknown child 'jump'"),
     ({"open_door": ["give_key"], "give_key": ["open_door_again"]}, "unknown child"),

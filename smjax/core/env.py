@@ -108,8 +108,8 @@ class Environment(Generic[TEnvState, TEnvParams]):
 
     def hierarchies(self) -> dict:
         """Named hierarchies (``smjax.options.Hierarchy``) over ``templates()``, the default
-        first (a run that names none trains the first); ``"flat"``, where given, is the one
-        the flat method trains."""
+        first (a run that names none trains the first). The flat method trains the chosen
+        one's flattening (``Hierarchy.flattened``)."""
         return {}
 
     @property

@@ -242,6 +242,19 @@ class Hierarchy:
                 mask[i, self.action_index(kid)] = True
         return mask
 
+    def flattened(self) -> "Hierarchy":
+        """The flat baseline of this hierarchy: one level, the root choosing among every
+        leaf (primitive actions and templates without children), the skills at the bottom
+        of the hierarchy first (deepest first, then in option order), with the same task
+        success. Scripted policies are dropped: the flat root learns. (For the built-in
+        hierarchies this is exactly their catalogue's ``flat``.)"""
+        leaves = [n for n in self.option_names[1:] if not self.children.get(n)]
+        leaves.sort(key=lambda n: -self.depth_of[n])  # stable: option order within a depth
+        primitives = [p for p in self.primitive_names if self.uses_primitives]
+        return Hierarchy(task=self.task, children={self.task: primitives + leaves},
+                         templates={n: self.templates[n] for n in leaves},
+                         primitive_names=self.primitive_names, success=self.success)
+
     def describe(self) -> str:
         lines = []
         for name in self.option_names:

@@ -29,7 +29,8 @@ class TrainConfig:
         order: sub-skills first from reset states), or flat (one learner, no hierarchy).
       algo: learner for every level: ppo, dqn or actor-critic (the paper's).
       hierarchy: name from ``env.hierarchies()``; None picks the environment's default
-        (the first of its catalogue). Ignored by ``flat`` (which uses "flat").
+        (the first of its catalogue). ``flat`` trains its flattening (one level over its
+        leaves: ``Hierarchy.flattened``).
       num_envs: parallel environments per seed.
       rollout_ticks: ticks per rollout (one learner update per rollout).
       updates_per_chunk: rollouts per compiled chunk (the host checks progress between chunks).

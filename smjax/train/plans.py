@@ -17,27 +17,28 @@ class LevelPlan:
 
 def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
                       ) -> tuple[str, Hierarchy]:
-    """The hierarchy a run uses: ``given`` (one declared by the caller, named
-    ``declared:<task>``), else "flat" for the flat method, else the named one, else the
-    environment's default: the first of its catalogue (``env.hierarchies()``)."""
+    """The hierarchy a run uses, and its name for results.json: ``given`` (one declared by
+    the caller, named ``declared:<task>``), else the named one, else the environment's
+    default (the first of its catalogue, ``env.hierarchies()``). The flat method trains
+    that hierarchy's flattening (``Hierarchy.flattened``: one level over its leaves),
+    named ``<name>:flattened``."""
     if given is not None:
         if not isinstance(given, Hierarchy):
             raise ConfigError(f"hierarchy must be a name or a smjax.options.Hierarchy (e.g. from "
                               f"declare(env, task, children)), got {type(given).__name__}")
-        if cfg.method == "flat":
-            raise ConfigError("the flat method trains the environment's flat hierarchy; a "
-                              "declared hierarchy is for top-down or bottom-up")
-        return f"declared:{given.task}", given
-    options = env.hierarchies()
-    if not options:
-        raise ValueError(f"environment {env.name!r} declares no hierarchies")
-    name = "flat" if cfg.method == "flat" else cfg.hierarchy
-    if name is None:
-        name = next(iter(options))
-    if name not in options:
-        raise ValueError(
-            f"unknown hierarchy {name!r} for {env.name!r}; valid: {', '.join(options)}")
-    return name, options[name]
+        name, chosen = f"declared:{given.task}", given
+    else:
+        options = env.hierarchies()
+        if not options:
+            raise ValueError(f"environment {env.name!r} declares no hierarchies")
+        name = next(iter(options)) if cfg.hierarchy is None else cfg.hierarchy
+        if name not in options:
+            raise ValueError(
+                f"unknown hierarchy {name!r} for {env.name!r}; valid: {', '.join(options)}")
+        chosen = options[name]
+    if cfg.method == "flat":
+        return f"{name}:flattened", chosen.flattened()
+    return name, chosen
 
 
 def declared_identity(h: Hierarchy) -> dict:

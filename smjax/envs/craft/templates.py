@@ -153,7 +153,8 @@ def make_hierarchies(env, task: str) -> dict[str, Hierarchy]:
             children = PAPER_CHILDREN[task]
         elif name == "recipe":
             children = recipe_children(task)
-        else:
-            children = {task: ["primitives"]}
+        else:  # flat: the task over the primitive actions
+            out[name] = next(iter(out.values())).flattened()
+            continue
         out[name] = declare(env, task, children)
     return out

@@ -146,9 +146,9 @@ def make_hierarchies(env) -> dict:
     paper_hold = dict(paper, stack=places + ["hold"])
     paper_hold_all = {name: [("hold" if c == "noop" else c) for c in children]
                       for name, children in paper_hold.items()}
-    flat = {"stack": [f"{k}_{i}" for i in range(n) for k in ("reach", "pick", "release")]
-            + ["noop"]}
-    return {"paper": declare(env, "stack", paper), "flat": declare(env, "stack", flat),
+    declared = declare(env, "stack", paper)
+    # flat: stack -> reach_i / pick_i / release_i for every block, then noop
+    return {"paper": declared, "flat": declared.flattened(),
             "paper_hold": declare(env, "stack", paper_hold),
             "paper_hold_all": declare(env, "stack", paper_hold_all),
             "root_only": declare(env, "stack", {"stack": places + ["hold"]}),

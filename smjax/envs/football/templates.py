@@ -262,12 +262,9 @@ def make_templates() -> dict[str, OptionTemplate]:
 
 
 def make_hierarchies(env) -> dict:
-    return {
-        "paper": declare(env, "win_game", {
-            "win_game": ["attack", "defend"],
-            "attack": ["maintain_possession", "charge", "shoot"],
-        }),
-        "flat": declare(env, "win_game", {
-            "win_game": ["maintain_possession", "charge", "shoot", "defend"],
-        }),
-    }
+    paper = declare(env, "win_game", {
+        "win_game": ["attack", "defend"],
+        "attack": ["maintain_possession", "charge", "shoot"],
+    })
+    # flat: win_game -> maintain_possession, charge, shoot, defend
+    return {"paper": paper, "flat": paper.flattened()}
