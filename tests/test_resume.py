@@ -124,3 +124,19 @@ def test_arrays_of_another_layout_are_refused_as_such_not_as_corrupt(tmp_path):
         ckpt.load_arrays(tmp_path, {"a": np.zeros(3)})
     restored = ckpt.load_arrays(tmp_path, {"a": np.zeros(3), "b": np.zeros(2)})
     assert float(restored["b"].sum()) == 2.0  # the same layout still restores
+
+
+def test_a_checkpoint_from_before_a_new_config_field_resumes_unless_it_differs(monkeypatch):
+    # a checkpoint written before ``level_side_cost_weight`` existed lacks it: it takes the
+    # default (which keeps the older behaviour), so the run resumes; a real difference in
+    # any field is still refused, by name
+    from smjax.train.run import check_resumable, run_identity
+
+    cfg = TrainConfig(**CFG)
+    identity = run_identity("keydoor", cfg, [0, 1], {})
+    old = {k: v for k, v in identity.items() if k != "level_side_cost_weight"}
+    monkeypatch.setattr(ckpt, "shared_meta", lambda out: {"meta": {"run": old}})
+    assert check_resumable("some/dir", identity)
+    changed = run_identity("keydoor", cfg.replace(level_side_cost_weight=1.0), [0, 1], {})
+    with pytest.raises(ConfigError, match="level_side_cost_weight: checkpoint 0.0 vs now 1.0"):
+        check_resumable("some/dir", changed)

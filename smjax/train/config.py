@@ -100,6 +100,9 @@ class TrainConfig:
         items held beyond the one promised), so its run stops leaving behind what the task's
         reward penalises; F_o success and the levels are unchanged.
       finetune_side_cost_weight: the side costs' weight (1: as the templates declare them).
+      level_side_cost_weight: the same shaping in the levels, at this weight (0: off): a
+        template learner is charged for what it picks up beyond its promise while it first
+        learns, where teleports below it never do (F_o success and thresholds unchanged).
       checkpoint_every: seconds between checkpoints when an output directory is given
         (0: after every chunk); a checkpoint is also written at the end of every level.
     """
@@ -132,6 +135,7 @@ class TrainConfig:
     finetune_max_episodes: int = 20_000
     finetune_side_cost: bool = True
     finetune_side_cost_weight: float = 1.0
+    level_side_cost_weight: float = 0.0
     checkpoint_every: float = 60.0
     tensorboard: bool = False
     agent: dict = field(default_factory=dict)
@@ -176,10 +180,10 @@ class TrainConfig:
         need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
         need(isinstance(self.gate, bool), "gate", "true or false")
         need(isinstance(self.finetune_side_cost, bool), "finetune_side_cost", "true or false")
-        need(isinstance(self.finetune_side_cost_weight, (int, float))
-             and not isinstance(self.finetune_side_cost_weight, bool)
-             and 0 <= self.finetune_side_cost_weight <= 100, "finetune_side_cost_weight",
-             "a number in [0, 100]")
+        for name in ("finetune_side_cost_weight", "level_side_cost_weight"):
+            value = getattr(self, name)
+            need(isinstance(value, (int, float)) and not isinstance(value, bool)
+                 and 0 <= value <= 100, name, "a number in [0, 100]")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
         if "gamma" in self.agent:  # one source: the trainer discounts with TrainConfig.gamma
             raise ConfigError(f"agent field 'gamma' = {self.agent['gamma']!r} would be ignored: the "

@@ -213,7 +213,8 @@ class HierarchyTrainer(ft.FinetunePhase):
         teleport = self._per_seed([not t for t in tuning], bool)
         keep = self._per_seed([t or self.cfg.continue_episodes for t in tuning], bool)
         weight = self.cfg.finetune_side_cost_weight if self.cfg.finetune_side_cost else 0.0
-        side_cost = self._per_seed([weight if t else 0.0 for t in tuning], jnp.float32)
+        side_cost = self._per_seed([weight if t else self.cfg.level_side_cost_weight
+                                    for t in tuning], jnp.float32)
         gamma = self._per_seed([self._gamma(s) for s in range(S)], jnp.float32)
         args = (a.state, active, a.bank, a.learned, learner, start, teleport, keep, side_cost,
                 gamma)

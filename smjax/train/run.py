@@ -48,7 +48,9 @@ def check_resumable(out_dir, identity: dict) -> bool:
     info = ckpt.shared_meta(out_dir)
     if info is None:
         return False
-    saved = info["meta"]["run"]
+    # a config field added since the checkpoint was written takes its default there: a new
+    # field's default keeps the behaviour of the versions before it
+    saved = TrainConfig().to_dict() | info["meta"]["run"]
     # (checkpoints of older versions recorded RUN_SETTINGS in the identity too)
     diff = [k for k in config_differences(saved, identity) if k not in RUN_SETTINGS]
     if diff:
