@@ -2,7 +2,8 @@
 
 Two processes with 2 virtual CPU devices each form a 4-device mesh; 4 seeds give
 seed-only sharding (one seed per device), so the numbers are bitwise those of one
-process with 4 virtual devices (and of 1 device: see test_sharding.py). Process 0
+process with 4 virtual devices (and of 1 device: see test_sharding.py), fine-tuning
+included; so are a sweep's, whose (point, seed) slots are just more seeds. Process 0
 writes everything; process 1 runs in an empty working directory with its own --out and
 must leave both untouched. A two-process run killed mid-level resumes (every process
 restoring process 0's checkpoint) to the same results.
@@ -25,9 +26,11 @@ from smjax.train import distributed as dist
 from smjax.train.sharding import training_mesh
 
 TESTS = str(Path(__file__).parent)
-CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=400,
-           success_window=64, gate_envs=32, eval_envs=32, finetune="off")
-# (fine-tuning is refused across processes: it deadlocked there, see smjax/train/run.py)
+# fine-tuning on, its budget small (two turns of 50 episodes) to keep the test short
+CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=300,
+           success_window=64, gate_envs=32, eval_envs=32, finetune="on",
+           finetune_max_episodes=100, finetune_turn_episodes=50)
+SEEDS = [0, 1, 2, 3]
 SCRIPT = """
 import sys
 sys.path.insert(0, {tests!r})
@@ -38,7 +41,8 @@ from hier_env import make_keydoor
 from smjax.train import TrainConfig
 from smjax.train.run import run
 assert joined == (jax.process_count() > 1)
-run(make_keydoor(), TrainConfig(**{cfg!r}), [0, 1, 2, 3], {out!r}, progress=False, resume={resume!r})
+run(make_keydoor(), TrainConfig(**{cfg!r}), {seeds!r}, {out!r}, progress=False, resume={resume!r},
+    sweep={sweep!r})
 """
 TIMING = ("wall_seconds", "compile_seconds")
 
@@ -50,7 +54,8 @@ def _free_port() -> int:
 
 
 def _start(out: Path, cwd: Path, devices: int, cfg: dict, resume: bool = False,
-           process: tuple[int, int, int] | None = None) -> subprocess.Popen:
+           process: tuple[int, int, int] | None = None, seeds: list[int] = SEEDS,
+           sweep: dict | None = None) -> subprocess.Popen:
     """One training process; ``process`` = (port, num_processes, process_id) joins a run."""
     env = dict(os.environ, JAX_PLATFORMS="cpu",
                XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
@@ -61,21 +66,30 @@ def _start(out: Path, cwd: Path, devices: int, cfg: dict, resume: bool = False,
         env.update({dist.ENV_COORDINATOR: f"127.0.0.1:{port}", dist.ENV_NUM_PROCESSES: str(n),
                     dist.ENV_PROCESS_ID: str(i)})
     cwd.mkdir(parents=True, exist_ok=True)
-    code = SCRIPT.format(tests=TESTS, cfg=cfg, out=str(out), resume=resume)
+    code = SCRIPT.format(tests=TESTS, cfg=cfg, out=str(out), resume=resume, seeds=seeds,
+                         sweep=sweep)
     return subprocess.Popen([sys.executable, "-c", code], env=env, cwd=cwd,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
-def _wait(procs: list[subprocess.Popen], timeout: float = 300) -> None:
+def _wait(procs: list[subprocess.Popen], timeout: float = 600) -> None:
+    # (a guard against a hang, not a speed check: on a loaded 2-core machine a two-process
+    # run with fine-tuning has taken over 300 s; a process past it is ended, not left behind)
     for proc in procs:
-        out, _ = proc.communicate(timeout=timeout)
+        try:
+            out, _ = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            for p in procs:
+                p.kill()
+            raise
         assert proc.returncode == 0, out[-3000:]
 
 
-def _pair(tmp: Path, out0: Path, cfg: dict, resume: bool = False) -> list[subprocess.Popen]:
+def _pair(tmp: Path, out0: Path, cfg: dict, resume: bool = False,
+          **kw) -> list[subprocess.Popen]:
     port = _free_port()
-    return [_start(out0, tmp / "cwd0", 2, cfg, resume, (port, 2, 0)),
-            _start(tmp / "p1_out", tmp / "cwd1", 2, cfg, resume, (port, 2, 1))]
+    return [_start(out0, tmp / "cwd0", 2, cfg, resume, (port, 2, 0), **kw),
+            _start(tmp / "p1_out", tmp / "cwd1", 2, cfg, resume, (port, 2, 1), **kw)]
 
 
 def _results(out: Path) -> dict:
@@ -120,11 +134,32 @@ def test_two_processes_equal_one_process(tmp_path):
     one, two = _results(tmp_path / "single"), _results(tmp_path / "multi")
     assert [lvl["template"] for lvl in two["levels"]] == ["open_door", "give_key"]
     assert two["levels"] == one["levels"]
+    assert two["finetune"]["turns"] == one["finetune"]["turns"]  # it fine-tuned, in step
     assert two["final_success"] == one["final_success"]
     assert two == one
     assert (tmp_path / "multi" / "curves.csv").read_text() == (tmp_path / "single" / "curves.csv").read_text()
     assert (tmp_path / "multi" / "checkpoints" / "latest.json").exists()
     # process 1 wrote nothing: neither its --out nor anything in its working directory
+    assert not (tmp_path / "p1_out").exists()
+    assert list((tmp_path / "cwd1").iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_sweep_on_two_processes_equals_one_process(tmp_path):
+    """2 points x 2 seeds: four slots on the seed axis, one per device as seeds are."""
+    kw = dict(seeds=[0, 1], sweep={"agent.learning_rate": [3e-4, 1e-3]})
+    cfg = CFG | {"max_episodes_per_level": 200}
+    _wait([_start(tmp_path / "single", tmp_path / "cwd", 4, cfg, **kw)])
+    _wait(_pair(tmp_path, tmp_path / "multi", cfg, **kw))
+
+    def numbers(out: Path) -> list[dict]:
+        sweep = json.loads((out / "sweep.json").read_text())
+        return [{"overrides": p["overrides"], "results": {
+            k: v for k, v in p["results"].items() if k not in TIMING}} for p in sweep["points"]]
+    assert len(numbers(tmp_path / "multi")) == 2
+    assert numbers(tmp_path / "multi") == numbers(tmp_path / "single")
+    for p in range(2):
+        assert _results(tmp_path / "multi" / f"point-{p}") == _results(tmp_path / "single" / f"point-{p}")
     assert not (tmp_path / "p1_out").exists()
     assert list((tmp_path / "cwd1").iterdir()) == []
 

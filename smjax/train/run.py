@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -112,22 +111,9 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
                               f"{cfg.hierarchy!r}; give one of them")
         cfg, hierarchy = cfg.replace(hierarchy=hierarchy), None
     cfg.validate()
-    if cfg.finetune_on and dist.is_multiprocess():
-        # measured: two processes deadlock once a seed starts fine-tuning (tests/test_distributed.py)
-        if cfg.finetune == "on":
-            raise ConfigError("fine-tuning does not run across several processes yet; pass "
-                              "--finetune off (TrainConfig(finetune='off')) for a multi-process "
-                              "run, or fine-tune on one process")
-        cfg = cfg.replace(finetune="off")  # "auto": on where it can run
-        if dist.is_writer():
-            print("smjax: fine-tuning is off in a multi-process run (not supported there yet)",
-                  file=sys.stderr)
     cfg = resolve_config(cfg)
     env_overrides = dict(env_overrides or {})
-    if sweep is not None:  # refused before anything is locked or compiled
-        if dist.is_multiprocess():
-            raise ConfigError("a sweep runs in one process for now; drop --sweep or run it "
-                              "on one process")
+    if sweep is not None:  # a bad sweep is refused before anything is locked or compiled
         from smjax.agents import make_agent  # (imported late: tests replace it)
 
         sweep = normalize_sweep(cfg, make_agent(cfg.algo, **cfg.agent), sweep)
