@@ -8,6 +8,7 @@ templates, masked per option). Seeds are a leading ``vmap`` axis.
 from __future__ import annotations
 
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, NamedTuple
 
 import jax
@@ -91,6 +92,7 @@ class Engine:
                      in_axes=(0, 0, 0, 0, 0, 0, None, None, None, 0, 0, None)),
             static_argnums=(11,))
         self._compiled_episodes: dict[tuple, Any] = {}
+        self._compiling: dict[tuple, Future] = {}  # episodes programs compiling in the background
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         self._warm = jax.jit(jax.vmap(agent.warm_start))
         # jitted, so it also slices a bank sharded over processes
@@ -217,14 +219,37 @@ class Engine:
         return {"return": ret.mean(), "success": success.mean(), "completed": done.mean(),
                 "env_steps": ticks * num_envs}
 
+    @staticmethod
+    def _signature(args: tuple, num_envs: int) -> tuple:
+        """What a compiled episodes program fixes: shapes, dtypes and how the arrays are
+        laid out over devices (a call with another layout gets its own compile, not an
+        error)."""
+        return (num_envs,) + tuple((x.shape, x.dtype, getattr(x, "sharding", None))
+                                   for x in jax.tree.leaves(args))
+
+    def compile_episodes_beside(self, args: tuple, num_envs: int) -> None:
+        """Start compiling the episodes program for these arguments' shapes in a background
+        thread (XLA compiles outside Python's lock): the caller compiles the training chunk
+        meanwhile, and on a 2-core CPU the two compiles overlap instead of adding up (a
+        quarter to a third of a run's compile time: benchmarks/RESULTS.md, section 12)."""
+        sig = self._signature(args, num_envs)
+        if sig in self._compiled_episodes or sig in self._compiling:
+            return
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="smjax-compile")
+        self._compiling[sig] = pool.submit(lambda: self.episodes.lower(*args, num_envs).compile())
+        pool.shutdown(wait=False)  # the thread ends with its compile
+
     def _run_episodes(self, args: tuple, num_envs: int) -> tuple[dict, float]:
         """Call the (once compiled, per ``num_envs``) episodes program; returns its result
-        and the seconds spent compiling it in this call (0 when already compiled)."""
-        sig = (num_envs,) + tuple((x.shape, x.dtype) for x in jax.tree.leaves(args))
+        and the seconds this call spent compiling it, or waiting for a background compile
+        (0 when already compiled)."""
+        sig = self._signature(args, num_envs)
         compile_s = 0.0
         if sig not in self._compiled_episodes:
             t0 = time.perf_counter()
-            self._compiled_episodes[sig] = self.episodes.lower(*args, num_envs).compile()
+            pending = self._compiling.pop(sig, None)
+            self._compiled_episodes[sig] = (pending.result() if pending is not None
+                                            else self.episodes.lower(*args, num_envs).compile())
             compile_s = time.perf_counter() - t0
         return self._compiled_episodes[sig](*args), compile_s
 
@@ -239,6 +264,14 @@ class Engine:
         puts the small per-call inputs where the caller's mesh needs them (every input
         must be global across processes). ``learner_state`` is not needed (nobody learns in
         evaluation); where given, only its params are passed (they are never run)."""
+        args = self.evaluate_args(keys, bank, learned, learner_state, place, policy=policy,
+                                  due=due, threshold=threshold)
+        return self._run_episodes(args, self.cfg.eval_envs)
+
+    def evaluate_args(self, keys, bank, learned, learner_state=None, place=_same, *,
+                      policy: str | None = None, due: list[bool] | None = None,
+                      threshold: float | None = None) -> tuple:
+        """The episodes program's arguments for an evaluation (see ``evaluate``)."""
         S = keys.shape[0]
         policy = self.frozen_policy if policy is None else policy
         if policy not in EVAL_TEMPERATURES:
@@ -253,8 +286,7 @@ class Engine:
         # the program (shared with the gate) takes learner params; with none, option 0's
         # bank entry has their shapes (the bank is built from the learners' params)
         params = self._bank_entry0(bank) if learner_state is None else learner_state.params
-        args = (keys, params, bank, learned, learner, start) + flags + (skip, decide)
-        return self._run_episodes(args, self.cfg.eval_envs)
+        return (keys, params, bank, learned, learner, start) + flags + (skip, decide)
 
     def gate(self, keys, state: SeedState, bank, learned, learners: list[int],
              starts: list[int], due: list[bool], thresholds: list[float],
@@ -262,6 +294,14 @@ class Engine:
         """Each seed's learner as it will be frozen, called where the levels above call it
         (``keys``: per seed, varied between attempts by the caller; a seed not ``due`` is
         skipped); a seed's episodes stop once passing its threshold or not is certain."""
+        args = self.gate_args(keys, state, bank, learned, learners, starts, due, thresholds,
+                              place)
+        return self._run_episodes(args, self.cfg.gate_envs)
+
+    def gate_args(self, keys, state: SeedState, bank, learned, learners: list[int],
+                  starts: list[int], due: list[bool], thresholds: list[float],
+                  place=_same) -> tuple:
+        """The episodes program's arguments for a gate attempt (see ``gate``)."""
         # a template's success is its F_o (0 or 1); the root's is the task's
         bounded = [o != 0 or self.success_bounded for o in learners]
         decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
@@ -271,5 +311,4 @@ class Engine:
         flags = place((jnp.asarray(True), jnp.asarray(temperature, jnp.float32),
                        jnp.asarray(self.cfg.gate_max_ticks)))
         learner, start, skip, decide = per_seed
-        args = (keys, state.learner.params, bank, learned, learner, start) + flags + (skip, decide)
-        return self._run_episodes(args, self.cfg.gate_envs)
+        return (keys, state.learner.params, bank, learned, learner, start) + flags + (skip, decide)
