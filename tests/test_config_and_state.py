@@ -43,8 +43,10 @@ def test_settings_that_do_not_change_results_are_not_the_run_identity():
 def test_host_state_round_trips_through_the_checkpoint_layout():
     plans = [LevelPlan("root", 0, 0, 2), LevelPlan("get_wood", 1, 0, 1)]
     st = TrainerState.new(plans, 2)
-    # per update: environment episodes, the window's summed success and episodes (0: not full)
-    assert st.level[1].count([3, 4], [0.0, 3.0], [0, 5], 64) == [(3, 64, None), (7, 128, 0.6)]
+    # per update: environment episodes, the window's batch totals (newest first) and its
+    # episodes (0: not full)
+    assert st.level[1].count([3, 4], [[1.0, 0.0], [2.0, 1.0]], [0, 5], 64) == \
+        [(3, 64, None), (7, 128, 0.6)]
     st.level[1].record_gate({"success": [0.0, 0.75], "env_steps": [0, 99]}, 1, 12)
     st.finish_level(1)
     st.finetune[0].turns.append({"template": "root", "episodes": 5, "running_success": None})
@@ -79,9 +81,10 @@ _push = jax.jit(jax.vmap(SuccessWindow.push))
 
 
 def _running(win, total, count, size):
-    """One push for one seed, read as the host reads it (float64 division)."""
-    win, (summed, seen) = _push(win, np.float32([total]), np.int32([count]), np.int32([size]))
-    return win, (float(summed[0]) / int(seen[0]) if int(seen[0]) else None)
+    """One push for one seed, read as the host reads it (``_Counters._count``)."""
+    win, (batches, seen) = _push(win, np.float32([total]), np.int32([count]), np.int32([size]))
+    st = TrainerState.new([], 1)
+    return win, st.level[0].count([0], np.asarray(batches), np.asarray(seen), 1)[0][2]
 
 
 def test_the_window_averages_whole_batches_of_at_least_its_length():
@@ -94,14 +97,18 @@ def test_the_window_averages_whole_batches_of_at_least_its_length():
 
 @pytest.mark.parametrize("size,slots", [(1, 1), (5, 5), (7, 12), (16, 16)])
 def test_the_device_window_equals_the_host_lists_and_migrates_from_them(size, slots):
-    """Binary successes (integer batch sums): the same running success, bit for bit, as
-    the float64 host lists, through wrap-arounds of the ring and empty updates; a window
-    built from the host lists (format 2's checkpoints) goes on exactly as the pushed one."""
+    """The same running success, bit for bit, as the float64 host lists, for binary and
+    fractional successes (float32 batch totals), through wrap-arounds of the ring and
+    empty updates; a window built from the host lists (format 2's checkpoints) goes on
+    exactly as the pushed one."""
     rng = random.Random(size * 100 + slots)
     win, history = SuccessWindow.empty(1, slots), []
     for step in range(300):
         count = rng.choice([0, 1, 1, 2, 3, size, size + 2])
-        total = float(sum(rng.random() < 0.6 for _ in range(count)))
+        if step % 2:
+            total = float(sum(rng.random() < 0.6 for _ in range(count)))
+        else:  # e.g. craft's make_stick F_o: fractions, summed in float32 on the device
+            total = float(np.float32(sum(rng.random() / 3 for _ in range(count))))
         win, running = _running(win, total, count, size)
         assert running == _append_window(history, total, count, size), step
         if step % 37 == 5:  # as a format-2 checkpoint restores

@@ -146,8 +146,9 @@ class Engine:
         ``windows``: the seed's running-success windows (learner's, task's:
         ``state.SuccessWindow``), ``sizes``: their sizes in episodes (int32 [2]; a task size
         of 0: the seed is not fine-tuning, its task window is left as it is). Each update's
-        batch goes in, and the chunk also returns, per update, each window's (summed
-        success, episodes), (0, 0) while not full; the host only divides. Without
+        batch goes in, and the chunk also returns, per update, each window's batch totals
+        (newest first) and episodes (0 while not full); the host reduces them in float64
+        (``SuccessWindow.push`` says why there). Without
         ``windows`` (a benchmark timing the chunk alone) those outputs are None."""
         controls = Controls(learner, start, learned, teleport, continue_episodes,
                             side_cost=side_cost, gamma=gamma)
@@ -175,11 +176,11 @@ class Engine:
             running = None
             if win is not None:
                 tuning = sizes[1] > 0
-                learner_win, learner_sums = win[0].push(
+                learner_win, learner_out = win[0].push(
                     stats.learner_success, stats.learner_episodes, sizes[0])
-                task_win, task_sums = win[1].push(
+                task_win, task_out = win[1].push(
                     stats.task_success, jnp.where(tuning, stats.task_episodes, 0), sizes[1])
-                win, running = (learner_win, task_win), (learner_sums, task_sums)
+                win, running = (learner_win, task_win), (learner_out, task_out)
             return (SeedState(carry, learner_state, key), win), (stats, metrics, running)
 
         (new, new_windows), (stats, metrics, running) = jax.lax.scan(

@@ -49,7 +49,7 @@ class FinetunePhase:
         return max(p.level for p in self.plans) + 1
 
     def _account_task(self, stats, task, s: int) -> bool:
-        """Count seed ``s``'s fine-tuning chunk (``task``: the task window's sums [S, U]);
+        """Count seed ``s``'s fine-tuning chunk (``task``: the task window's, per update);
         True if its teleport-free task success over the window reached the threshold."""
         cfg, rec, seed = self.cfg, self.state.finetune[s], self.seeds[s]
         rows = rec.count(stats.env_episodes[s], task[0][s], task[1][s],

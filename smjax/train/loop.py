@@ -137,9 +137,9 @@ class HierarchyTrainer(ft.FinetunePhase):
         bar = Progress(self) if self.progress else None
         while self._training():
             t0 = time.perf_counter()
-            stats, sums = self._chunk()
+            stats, windows = self._chunk()
             dt = time.perf_counter() - t0
-            candidates, task_candidates = self._account(stats, sums)
+            candidates, task_candidates = self._account(stats, windows)
             st.chunks += 1
             passed = self._accept(candidates)
             task_passed = self._accept_task(task_candidates)
@@ -199,7 +199,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         return jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
 
     def _chunk(self):
-        """One compiled chunk for every seed at its own level; its stats, windows' sums [S, U]."""
+        """One compiled chunk for every seed at its own level; its stats and windows [S, U]."""
         S, a = len(self.seeds), self.arrays
         active = self._per_seed([i < self.num_stages for i in self.state.stage], bool)
         learner = self._place_small(self._options())
@@ -222,15 +222,15 @@ class HierarchyTrainer(ft.FinetunePhase):
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()
             self.state.compile_seconds += time.perf_counter() - t0
-        state, stats, _, (window, task_window), sums = self._compiled(*args)
-        stats, sums = dist.gather((stats, sums))  # [S, U], the same on every process
+        state, stats, _, (window, task_window), windows = self._compiled(*args)
+        stats, windows = dist.gather((stats, windows))  # [S, U, ...], the same on every process
         if not all_finite(state.learner.params):
             where = ", ".join(f"seed {self.seeds[s]} level {self._plan(s).level} "
                               f"({self._plan(s).name})" for s in self._training())
             raise NonFiniteError(f"non-finite learner parameters in chunk {self.state.chunks} "
                                  f"(training: {where})")
         self.arrays = a.replace(state=state, window=window, task_window=task_window)
-        return stats, sums
+        return stats, windows
 
     def _evaluate(self, t_start: float) -> dict:
         a, st = self.arrays, self.state
@@ -294,17 +294,17 @@ class HierarchyTrainer(ft.FinetunePhase):
         # clocks differ between processes, and saving is collective: process 0 decides
         return dist.agree(due) if self.cfg.checkpoint_every > 0 else due
 
-    def _account(self, stats, sums) -> tuple[list[int], list[int]]:
-        """Count a chunk's episodes, steps, windows' sums (``sums``: learner's, task's);
+    def _account(self, stats, windows) -> tuple[list[int], list[int]]:
+        """Count a chunk's episodes, steps and windows (learner's, task's: ``Engine._chunk``);
         record the curves; the seeds whose running success reached the threshold (levels), and
         the fine-tuning seeds whose task success reached theirs."""
         task_candidates = [s for s in self._training() if self._finetuning(s)
-                           and self._account_task(stats, sums[1], s)]
+                           and self._account_task(stats, windows[1], s)]
         candidates = []
         steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
         for s in self._training():
             plan, cfg, seed, c = self._plan(s), self._level_cfg(s), self.seeds[s], self.state.level[s]
-            rows = c.count(stats.env_episodes[s], *(x[s] for x in sums[0]), steps_per_update)
+            rows = c.count(stats.env_episodes[s], *(x[s] for x in windows[0]), steps_per_update)
             for episodes, env_steps, running in rows:
                 if not self._finetuning(s):  # (fine-tuning records the task's curve)
                     self.state.curves.append([seed, plan.level, plan.name, episodes, env_steps,

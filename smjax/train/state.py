@@ -11,8 +11,9 @@ position), which is format 2's with the running-success windows moved from the h
 format-2 checkpoint is migrated on restore (``TrainArrays.migrated``).
 
 The running-success windows are ring buffers on the device, updated inside the compiled
-chunk after every update; the chunk returns, per update, the window's summed success
-and its episodes, and the host only divides (``_Counters._count``).
+chunk after every update; the chunk returns, per update, which batches form the window
+(their float32 totals, newest first) and its episodes; the host keeps no window and only
+reduces those in float64 (``_Counters._count``), exactly as it did over its own lists.
 """
 from __future__ import annotations
 
@@ -66,16 +67,16 @@ class SuccessWindow:
 
     def push(self, total: jax.Array, count: jax.Array, size: jax.Array):
         """Add a batch of ``count`` episodes (none: nothing added) whose successes sum to
-        ``total``; returns the window and its (summed success, episodes) over the most
-        recent whole batches that hold at least ``size`` episodes ((0, 0): fewer so far).
+        ``total``; returns the window and, over the most recent whole batches that hold at
+        least ``size`` episodes, their totals newest first ([K], 0 past the window) and
+        their episodes (0: fewer than ``size`` so far, no running success yet).
 
-        The host divides the two in float64, as it did over its own lists before (format
-        2), so the running success and every decision on it are the same: the sum is the
-        float32 sum of the same float32 batch totals, which is exact whenever they are
-        integers (binary successes: every template's F_o, the task success of craft and
-        key-door; exact below 2**24 episodes), so it equals the old float64 sum and the
-        float64 division is the same operation on the same numbers. A fractional success
-        (fetch's root score) is summed with float32 rounding (relative ~K * 2**-24)."""
+        The sum is left to the host (``_Counters._count``): it adds these float32 totals
+        in float64, newest first, and divides, the very operations it ran over its own
+        lists before (format 2), so the running success is the same to the last bit and
+        so is every decision on it. A float32 sum on the device would be exact only for
+        integer batch totals, and successes are not always 0/1 (e.g. craft's make_stick
+        F_o): it moved curves' last digits."""
         K = self.count.shape[-1]
         add = count > 0
         at = self.next
@@ -89,9 +90,7 @@ class SuccessWindow:
         newer = jnp.cumsum(counts) - counts
         inside = newer < size
         seen = jnp.where(inside, counts, 0).sum()
-        full = seen >= size
-        summed = jnp.where(inside, totals, 0.0).sum()
-        return win, (jnp.where(full, summed, 0.0), jnp.where(full, seen, 0))
+        return win, (jnp.where(inside, totals, 0.0), jnp.where(seen >= size, seen, 0))
 
 
 @struct.dataclass
@@ -128,14 +127,17 @@ class _Counters:
 
     def _count(self, episodes, totals, seen, steps_per_update: int
                ) -> list[tuple[int, int, float | None]]:
-        """Per update (environment episodes; the window's summed success and episodes, 0
-        while not full): count it; (episodes, env_steps, running success) after it."""
+        """Per update (environment episodes; the window's batch totals, newest first, and
+        its episodes, 0 while not full: ``SuccessWindow.push``): count it; (episodes,
+        env_steps, running success) after it."""
         rows = []
-        for e, total, n in zip(episodes, totals, seen):
+        for e, batches, n in zip(episodes, totals, seen):
             self.episodes += int(e)
             self.env_steps += steps_per_update
-            # float64 on the host, from the device's exact sums: see SuccessWindow.push
-            rows.append((self.episodes, self.env_steps, float(total) / int(n) if n else None))
+            # a sequential float64 sum, newest first (cumsum does not pair up terms): the
+            # old lists' arithmetic on the same float32 totals (zeros past the window add 0)
+            total = float(np.cumsum(np.asarray(batches, np.float64))[-1])
+            rows.append((self.episodes, self.env_steps, total / int(n) if n else None))
         return rows
 
     def record_gate(self, result: dict, s: int, next_chunk: int) -> float:
@@ -163,7 +165,7 @@ class LevelCounters(_Counters):
     def count(self, episodes, totals, seen, steps_per_update: int
               ) -> list[tuple[int, int, float | None]]:
         """Count a chunk's updates (per update: environment episodes, the learner window's
-        summed success and episodes); per update, (episodes, env_steps, running) after it."""
+        batch totals and episodes); per update, (episodes, env_steps, running) after it."""
         rows = self._count(episodes, totals, seen, steps_per_update)
         self.running = rows[-1][2] if rows else self.running
         return rows
@@ -186,7 +188,7 @@ class FinetuneCounters(_Counters):
 
     def count(self, episodes, totals, seen, steps_per_update: int
               ) -> list[tuple[int, int, float | None]]:
-        """Count a fine-tuning chunk's updates (the task window's sums); per update,
+        """Count a fine-tuning chunk's updates (the task window's batches); per update,
         (episodes, env_steps, task_running) after it."""
         rows = self._count(episodes, totals, seen, steps_per_update)
         self.task_running = rows[-1][2] if rows else self.task_running
