@@ -8,9 +8,9 @@ one compiled program, each at its own level: the option being trained and the op
 episodes start from are per-seed traced values, so a seed that finishes a level starts
 the next one in the next chunk instead of waiting for the slowest seed (only a seed that
 has finished every level is masked). A seed's numbers do not depend on the other seeds.
-Everything the loop knows lives in ``arrays`` (device state, ``TrainArrays``) and
-``state`` (host counters, ``TrainerState``; :mod:`smjax.train.state`), which is exactly
-what a checkpoint holds, so a resumed run continues bit for bit.
+Everything the loop knows lives in ``arrays`` (device state, ``TrainArrays``, with the
+running-success windows) and ``state`` (host counters, ``TrainerState``; both in
+:mod:`smjax.train.state`): exactly what a checkpoint holds, so a resumed run continues bit for bit.
 """
 from __future__ import annotations
 
