@@ -276,7 +276,7 @@ def shared_meta(out_dir: str | Path) -> dict | None:
 
 def check_format(out_dir: str | Path, meta: dict, oldest: int, newest: int) -> int:
     """The checkpoint's format (``meta["format"]``), if this smjax reads it; else a
-    ``CheckpointError`` saying which side is too old."""
+    ``CheckpointError`` saying whether it is too old or too new."""
     version = meta.get("format", 1)
     if "finetune" in meta["host"] and oldest <= version <= newest:
         return version
