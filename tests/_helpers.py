@@ -16,3 +16,39 @@ def lose_machine_after_save(monkeypatch, when) -> None:
             raise MachineLost
 
     monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
+
+
+def as_format_2(out, window: int) -> None:
+    """Rewrite the checkpoint in ``out`` as smjax wrote it before the running-success
+    windows were arrays (checkpoint format 2): the window arrays (the last leaves) dropped,
+    each window as the host list of ``[total, count]`` batches that format kept (oldest
+    first, trimmed to the most recent batches holding ``window`` episodes)."""
+    import numpy as np
+    import orbax.checkpoint as ocp
+
+    from smjax.train import checkpoint as ckpt
+
+    info = ckpt.load_meta(out)
+    leaves = ocp.StandardCheckpointer().restore(ckpt.checkpoint_dir(out) / info["path"])
+    n = max(int(k) for k in leaves) + 1
+    # TrainArrays' last fields: window (total, count, next), task_window (total, count, next)
+    windows = [np.asarray(leaves[str(i)]) for i in range(n - 6, n)]
+
+    def lists(total, count, nxt):
+        out = []
+        for t, c, k in zip(total, count, nxt):
+            batches, seen = [], 0
+            for j in range(len(c)):  # newest first, until the window is covered
+                i = (k - 1 - j) % len(c)
+                if c[i] == 0 or seen >= window:
+                    break
+                batches.insert(0, [float(t[i]), int(c[i])])
+                seen += int(c[i])
+            out.append(batches)
+        return out
+
+    host = info["meta"]["host"]
+    host["history"] = lists(*windows[:3])
+    host["finetune"]["task_history"] = lists(*windows[3:])
+    arrays = [leaves[str(i)] if str(i) in leaves else np.zeros((0,)) for i in range(n - 6)]
+    ckpt.save_checkpoint(out, info["step"], arrays, info["meta"] | {"format": 2})

@@ -1,14 +1,19 @@
 """resolve_config merges a run's configuration sources in one order; the trainer's host
-state round-trips through the checkpoint's JSON layout (format 2). Fast: nothing compiles."""
+state round-trips through the checkpoint's JSON layout (format 3, and reads format 2's);
+the device's running-success window gives what the host's float64 lists gave. Fast: only
+small programs compile."""
 import json
+import random
 
+import jax
+import numpy as np
 import pytest
 
 from smjax.train import ConfigError, TrainConfig
 from smjax.train.config import RUN_SETTINGS, resolve_config
 from smjax.train.plans import LevelPlan
 from smjax.train.run import run_identity
-from smjax.train.state import TrainerState, append_window
+from smjax.train.state import SuccessWindow, TrainerState
 
 
 def test_sources_override_in_order(tmp_path):
@@ -38,7 +43,10 @@ def test_settings_that_do_not_change_results_are_not_the_run_identity():
 def test_host_state_round_trips_through_the_checkpoint_layout():
     plans = [LevelPlan("root", 0, 0, 2), LevelPlan("get_wood", 1, 0, 1)]
     st = TrainerState.new(plans, 2)
-    st.level[1].count([3, 4], [2.0, 1.0], [3, 2], 64, window=4)
+    # per update: environment episodes, the window's batch totals (newest first) and its
+    # episodes (0: not full)
+    assert st.level[1].count([3, 4], [[1.0, 0.0], [2.0, 1.0]], [0, 5], 64) == \
+        [(3, 64, None), (7, 128, 0.6)]
     st.level[1].record_gate({"success": [0.0, 0.75], "env_steps": [0, 99]}, 1, 12)
     st.finish_level(1)
     st.finetune[0].turns.append({"template": "root", "episodes": 5, "running_success": None})
@@ -48,11 +56,60 @@ def test_host_state_round_trips_through_the_checkpoint_layout():
     assert host["finetune"]["turns"] == [[{"template": "root", "episodes": 5,
                                            "running_success": None}], []]
     assert TrainerState.from_json(host) == st
+    assert "history" not in host and "task_history" not in host["finetune"]
+    # format 2 listed the windows in the host state (read into the arrays by
+    # ``TrainArrays.migrated``): the rest of its host state reads as before
+    old = host | {"history": [[], [[1.0, 2]]]}
+    old["finetune"] = old["finetune"] | {"task_history": [[[0.0, 3], [2.0, 2]], []]}
+    assert TrainerState.from_json(old) == st
+
+
+def _append_window(history: list, total: float, count: int, window: int) -> float | None:
+    """The host window before format 3 (smjax's ``state.append_window``), the reference."""
+    if count:
+        history.append([total, count])
+    total, seen, keep = 0.0, 0, 0
+    for s, c in reversed(history):
+        total, seen, keep = total + s, seen + c, keep + 1
+        if seen >= window:
+            break
+    del history[:len(history) - keep]
+    return total / seen if seen >= window else None
+
+
+_push = jax.jit(jax.vmap(SuccessWindow.push))
+
+
+def _running(win, total, count, size):
+    """One push for one seed, read as the host reads it (``_Counters._count``)."""
+    win, (batches, seen) = _push(win, np.float32([total]), np.int32([count]), np.int32([size]))
+    st = TrainerState.new([], 1)
+    return win, st.level[0].count([0], np.asarray(batches), np.asarray(seen), 1)[0][2]
 
 
 def test_the_window_averages_whole_batches_of_at_least_its_length():
-    history = []
-    assert append_window(history, 1.0, 2, 4) is None
-    assert append_window(history, 0.0, 0, 4) is None  # no episodes: nothing added
-    assert append_window(history, 3.0, 3, 4) == 4.0 / 5
-    assert append_window(history, 4.0, 4, 4) == 1.0 and history == [[4.0, 4]]
+    win = SuccessWindow.empty(1, 4)
+    for total, count, expected in ((1.0, 2, None), (0.0, 0, None),  # no episodes: no batch
+                                   (3.0, 3, 4.0 / 5), (4.0, 4, 1.0), (0.0, 0, 1.0)):
+        win, running = _running(win, total, count, 4)
+        assert running == expected
+
+
+@pytest.mark.parametrize("size,slots", [(1, 1), (5, 5), (7, 12), (16, 16)])
+def test_the_device_window_equals_the_host_lists_and_migrates_from_them(size, slots):
+    """The same running success, bit for bit, as the float64 host lists, for binary and
+    fractional successes (float32 batch totals), through wrap-arounds of the ring and
+    empty updates; a window built from the host lists (format 2's checkpoints) goes on
+    exactly as the pushed one."""
+    rng = random.Random(size * 100 + slots)
+    win, history = SuccessWindow.empty(1, slots), []
+    for step in range(300):
+        count = rng.choice([0, 1, 1, 2, 3, size, size + 2])
+        if step % 2:
+            total = float(sum(rng.random() < 0.6 for _ in range(count)))
+        else:  # e.g. craft's make_stick F_o: fractions, summed in float32 on the device
+            total = float(np.float32(sum(rng.random() / 3 for _ in range(count))))
+        win, running = _running(win, total, count, size)
+        assert running == _append_window(history, total, count, size), step
+        if step % 37 == 5:  # as a format-2 checkpoint restores
+            win = SuccessWindow.from_lists([list(history)], slots)

@@ -1,5 +1,6 @@
 """Fine-tuning: after the levels, the learned hierarchy keeps learning without teleports."""
 import dataclasses
+import shutil
 
 import jax
 import jax.numpy as jnp
@@ -8,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from _helpers import MachineLost, lose_machine_after_save
+from _helpers import MachineLost, as_format_2, lose_machine_after_save
 from hier_env import KeyDoor, make_keydoor
 from smjax.agents import make_agent
 from smjax.train import ConfigError, TrainConfig
@@ -117,8 +118,17 @@ def test_resume_during_finetuning_is_exact(tmp_path, monkeypatch):
         run(make_keydoor(), cfg, [0, 1], out, progress=False)
     monkeypatch.undo()
     assert any(t >= 1 for t in ckpt.load_meta(out)["meta"]["host"]["finetune"]["turn"])
+    # the same checkpoint as the previous smjax wrote it (format 2: the windows as host
+    # lists) resumes as exactly: its windows are built from the lists
+    old = tmp_path / "format2"
+    shutil.copytree(out, old)
+    as_format_2(old, SMALL["success_window"])
+    host = ckpt.load_meta(old)["meta"]["host"]
+    assert any(host["finetune"]["task_history"]) and any(host["history"])
     resumed = run(make_keydoor(), cfg, [0, 1], out, progress=False, resume=True)
     assert _strip_timing(resumed) == _strip_timing(straight)
+    migrated = run(make_keydoor(), cfg, [0, 1], old, progress=False, resume=True)
+    assert _strip_timing(migrated) == _strip_timing(straight)
 
 
 @settings(max_examples=25, deadline=None)

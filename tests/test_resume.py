@@ -140,3 +140,18 @@ def test_a_checkpoint_from_before_a_new_config_field_resumes_unless_it_differs(m
     changed = run_identity("keydoor", cfg.replace(level_side_cost_weight=1.0), [0, 1], {})
     with pytest.raises(ConfigError, match="level_side_cost_weight: checkpoint 0.0 vs now 1.0"):
         check_resumable("some/dir", changed)
+
+
+def test_checkpoint_formats_this_smjax_cannot_read_are_refused_by_name(tmp_path):
+    # format 2 (windows as host lists) is migrated on restore (test_finetune resumes one);
+    # older ones and newer ones are refused, saying which
+    from smjax.train.loop import CHECKPOINT_FORMAT
+
+    host = {"finetune": {}}
+    for version in range(2, CHECKPOINT_FORMAT + 1):
+        assert ckpt.check_format(tmp_path, {"format": version, "host": host}, 2,
+                                 CHECKPOINT_FORMAT) == version
+    for meta, which in (({"host": host}, "an older"), ({"format": 2, "host": {}}, "an older"),
+                        ({"format": CHECKPOINT_FORMAT + 1, "host": host}, "a newer")):
+        with pytest.raises(ckpt.CheckpointError, match=f"written by {which} smjax"):
+            ckpt.check_format(tmp_path, meta, 2, CHECKPOINT_FORMAT)

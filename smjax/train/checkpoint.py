@@ -274,6 +274,19 @@ def shared_meta(out_dir: str | Path) -> dict | None:
     return dist.broadcast_json(load_meta(out_dir) if dist.is_writer() else None)
 
 
+def check_format(out_dir: str | Path, meta: dict, oldest: int, newest: int) -> int:
+    """The checkpoint's format (``meta["format"]``), if this smjax reads it; else a
+    ``CheckpointError`` saying whether it is too old or too new."""
+    version = meta.get("format", 1)
+    if "finetune" in meta["host"] and oldest <= version <= newest:
+        return version
+    which = ("a newer smjax" if version > newest else
+             "an older smjax (before learner states carried their hyper-parameters)")
+    raise CheckpointError(f"the checkpoint in {checkpoint_dir(out_dir)} was written by {which} "
+                          f"(format {version}; this one reads {oldest} to {newest}); it cannot "
+                          f"be resumed by this one")
+
+
 def load_arrays(out_dir: str | Path, like: Any) -> Any:
     import orbax.checkpoint as ocp
 

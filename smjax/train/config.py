@@ -222,6 +222,13 @@ class TrainConfig:
         """Episode starts per rollout (``reset_pool`` resolved; 0: none, reset every tick)."""
         return self.num_envs if self.reset_pool is None else self.reset_pool
 
+    @property
+    def window_slots(self) -> int:
+        """Batches a running-success window keeps on the device: the largest
+        ``success_window`` of any level (each kept batch holds at least one episode)."""
+        return max([self.success_window] + [int(v.get("success_window", 0))
+                                            for v in self.levels.values()])
+
     def for_level(self, template: str) -> "TrainConfig":
         """The config a level trains with: this one plus ``levels[template]``'s overrides."""
         return dataclasses.replace(self, levels={}, **self.levels.get(template, {}))

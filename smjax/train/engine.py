@@ -136,17 +136,26 @@ class Engine:
 
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
     def _chunk(self, state: SeedState, active, bank, learned, learner, start, teleport,
-               continue_episodes, side_cost, gamma):
+               continue_episodes, side_cost, gamma, windows=None, sizes=None):
         """``teleport``/``continue_episodes``/``side_cost``: the levels' setting (teleports
         on, episodes reset with the learner's option unless ``TrainConfig.continue_episodes``,
         no side-cost shaping) or fine-tuning's (the learned hierarchy alone, whole task
         episodes, side costs as ``TrainConfig.finetune_side_cost`` says). ``gamma``: the
-        seed's discount (traced: a sweep over it compiles once)."""
+        seed's discount (traced: a sweep over it compiles once).
+
+        ``windows``: the seed's running-success windows (learner's, task's:
+        ``state.SuccessWindow``), ``sizes``: their sizes in episodes (int32 [2]; a task size
+        of 0: the seed is not fine-tuning, its task window is left as it is). Each update's
+        batch goes in, and the chunk also returns, per update, each window's batch totals
+        (newest first) and episodes (0 while not full); the host reduces them in float64
+        (``SuccessWindow.push`` says why there). Without
+        ``windows`` (a benchmark timing the chunk alone) those outputs are None."""
         controls = Controls(learner, start, learned, teleport, continue_episodes,
                             side_cost=side_cost, gamma=gamma)
         runner, agent, cfg = self.runner, self.agent, self.cfg
 
-        def update_step(st: SeedState, _):
+        def update_step(c, _):
+            st, win = c
             key, k_roll, k_upd = jax.random.split(st.key, 3)
             carry = st.carry
             if runner.reset_pool:  # fresh episode starts for this rollout
@@ -164,12 +173,24 @@ class Engine:
             carry = carry.replace(pending=pending)
             learner_state, metrics = agent.update(st.learner, traj, k_upd)
             stats = jax.tree.map(lambda x: x.sum(0), stats)
-            return SeedState(carry, learner_state, key), (stats, metrics)
+            running = None
+            if win is not None:
+                tuning = sizes[1] > 0
+                learner_win, learner_out = win[0].push(
+                    stats.learner_success, stats.learner_episodes, sizes[0])
+                task_win, task_out = win[1].push(
+                    stats.task_success, jnp.where(tuning, stats.task_episodes, 0), sizes[1])
+                win, running = (learner_win, task_win), (learner_out, task_out)
+            return (SeedState(carry, learner_state, key), win), (stats, metrics, running)
 
-        new, (stats, metrics) = jax.lax.scan(update_step, state, None, cfg.updates_per_chunk)
+        (new, new_windows), (stats, metrics, running) = jax.lax.scan(
+            update_step, (state, windows), None, cfg.updates_per_chunk)
         new = select_tree(active, new, state)
         stats = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), stats)
-        return new, stats, metrics
+        if windows is not None:
+            new_windows = select_tree(active, new_windows, windows)
+            running = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), running)
+        return new, stats, metrics, new_windows, running
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
     def _first_episodes(self, key, learner_params, bank, learned, learner, start, teleport,

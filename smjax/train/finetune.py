@@ -48,12 +48,12 @@ class FinetunePhase:
         """The level number fine-tuning's curve is recorded under (after the last level)."""
         return max(p.level for p in self.plans) + 1
 
-    def _account_task(self, stats, s: int) -> bool:
-        """Count seed ``s``'s fine-tuning chunk; True if its teleport-free task success
-        over the window reached the threshold."""
+    def _account_task(self, stats, task, s: int) -> bool:
+        """Count seed ``s``'s fine-tuning chunk (``task``: the task window's, per update);
+        True if its teleport-free task success over the window reached the threshold."""
         cfg, rec, seed = self.cfg, self.state.finetune[s], self.seeds[s]
-        rows = rec.count(stats.env_episodes[s], stats.task_success[s], stats.task_episodes[s],
-                         cfg.num_envs * cfg.rollout_ticks, cfg.success_window)
+        rows = rec.count(stats.env_episodes[s], task[0][s], task[1][s],
+                         cfg.num_envs * cfg.rollout_ticks)
         for episodes, env_steps, running in rows:
             self.state.curves.append([seed, self.finetune_level, "finetune", episodes,
                                       env_steps, running, s])

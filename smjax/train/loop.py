@@ -8,9 +8,9 @@ one compiled program, each at its own level: the option being trained and the op
 episodes start from are per-seed traced values, so a seed that finishes a level starts
 the next one in the next chunk instead of waiting for the slowest seed (only a seed that
 has finished every level is masked). A seed's numbers do not depend on the other seeds.
-Everything the loop knows lives in ``arrays`` (device state, ``TrainArrays``) and
-``state`` (host counters, ``TrainerState``; :mod:`smjax.train.state`), which is exactly
-what a checkpoint holds, so a resumed run continues bit for bit.
+Everything the loop knows lives in ``arrays`` (device state, ``TrainArrays``, with the
+running-success windows) and ``state`` (host counters, ``TrainerState``; both in
+:mod:`smjax.train.state`): exactly what a checkpoint holds, so a resumed run continues bit for bit.
 """
 from __future__ import annotations
 
@@ -30,11 +30,11 @@ from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
 from smjax.train.plans import LevelPlan, plan_levels
 from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
-from smjax.train.state import TrainArrays, TrainerState
+from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 
 
-# 2: learner states carry their sweepable hyper-parameters (state.hp)
-CHECKPOINT_FORMAT = 2
+# 2: learner states carry their hyper-parameters (state.hp); 3: success windows are arrays
+CHECKPOINT_FORMAT = 3
 
 
 class NonFiniteError(FloatingPointError):
@@ -69,7 +69,8 @@ class HierarchyTrainer(ft.FinetunePhase):
         self.arrays = TrainArrays(
             bank=engine.new_bank(learner), keys=keys,
             learned=jnp.zeros((S, engine.h.num_options), bool),
-            state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys))
+            state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
+            **SuccessWindow.pair(S, self.cfg.window_slots))
         self.state = TrainerState.new(plans, S)
         self._compiled = None
         self._last_save = time.perf_counter()
@@ -86,10 +87,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         if self.mesh is None:
             return
         a = self.arrays
-        shardings = TrainArrays(bank=seed_sharding(self.mesh, a.bank),
-                                keys=seed_sharding(self.mesh, a.keys),
-                                learned=seed_sharding(self.mesh, a.learned),
-                                state=state_shardings(self.mesh, a.state))
+        shardings = seed_sharding(self.mesh, a).replace(state=state_shardings(self.mesh, a.state))
         self.arrays = dist.place(a, shardings)
 
     def _place_small(self, tree):
@@ -114,21 +112,19 @@ class HierarchyTrainer(ft.FinetunePhase):
         self._last_save = time.perf_counter()
 
     def restore(self) -> bool:
-        """Resume from process 0's checkpoint; every process gets the same state."""
+        """Resume from process 0's checkpoint (format 2 is migrated); the same on every process."""
         info = ckpt.shared_meta(self.out_dir) if self.out_dir is not None else None
         if info is None:
             return False
-        if "finetune" not in info["meta"]["host"] or info["meta"].get("format", 1) < CHECKPOINT_FORMAT:
-            raise ckpt.CheckpointError(
-                f"the checkpoint in {ckpt.checkpoint_dir(self.out_dir)} was written by an older "
-                f"smjax (before learner states carried their hyper-parameters); it cannot be "
-                f"resumed by this one")
+        version = ckpt.check_format(self.out_dir, info["meta"], 2, CHECKPOINT_FORMAT)
+        like = self.arrays.as_stored(version)
         if dist.is_multiprocess():
-            like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), self.arrays)
+            like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), like)
             loaded = ckpt.load_arrays(self.out_dir, like) if self.writer else like
-            self.arrays = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
+            loaded = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
         else:
-            self.arrays = ckpt.load_arrays(self.out_dir, self.arrays)
+            loaded = ckpt.load_arrays(self.out_dir, like)
+        self.arrays = loaded.migrated(info["meta"]["host"], self.cfg.window_slots)
         self.state = TrainerState.from_json(info["meta"]["host"])
         self._place()
         return True
@@ -141,9 +137,9 @@ class HierarchyTrainer(ft.FinetunePhase):
         bar = Progress(self) if self.progress else None
         while self._training():
             t0 = time.perf_counter()
-            stats = self._chunk()
+            stats, windows = self._chunk()
             dt = time.perf_counter() - t0
-            candidates, task_candidates = self._account(stats)
+            candidates, task_candidates = self._account(stats, windows)
             st.chunks += 1
             passed = self._accept(candidates)
             task_passed = self._accept_task(task_candidates)
@@ -203,7 +199,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         return jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
 
     def _chunk(self):
-        """One compiled chunk for every seed at its own level; returns its stats [S, U]."""
+        """One compiled chunk for every seed at its own level; its stats and windows [S, U]."""
         S, a = len(self.seeds), self.arrays
         active = self._per_seed([i < self.num_stages for i in self.state.stage], bool)
         learner = self._place_small(self._options())
@@ -216,22 +212,25 @@ class HierarchyTrainer(ft.FinetunePhase):
         side_cost = self._per_seed([weight if t else self.cfg.level_side_cost_weight
                                     for t in tuning], jnp.float32)
         gamma = self._per_seed([self._gamma(s) for s in range(S)], jnp.float32)
+        # the windows' sizes: the level's (or turn's option's), the task's (0: not fine-tuning)
+        sizes = self._per_seed([[self._level_cfg(s).success_window, self.cfg.success_window * t]
+                                for s, t in enumerate(tuning)], jnp.int32)
         args = (a.state, active, a.bank, a.learned, learner, start, teleport, keep, side_cost,
-                gamma)
+                gamma, (a.window, a.task_window), sizes)
         if self._compiled is None:  # one compile serves every level (ids are traced)
             self._compile_episodes_beside()
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()
             self.state.compile_seconds += time.perf_counter() - t0
-        state, stats, _ = self._compiled(*args)
-        stats = dist.gather(stats)  # [S, U], the same on every process
+        state, stats, _, (window, task_window), windows = self._compiled(*args)
+        stats, windows = dist.gather((stats, windows))  # [S, U, ...], the same on every process
         if not all_finite(state.learner.params):
             where = ", ".join(f"seed {self.seeds[s]} level {self._plan(s).level} "
                               f"({self._plan(s).name})" for s in self._training())
             raise NonFiniteError(f"non-finite learner parameters in chunk {self.state.chunks} "
                                  f"(training: {where})")
-        self.arrays = a.replace(state=state)
-        return stats
+        self.arrays = a.replace(state=state, window=window, task_window=task_window)
+        return stats, windows
 
     def _evaluate(self, t_start: float) -> dict:
         a, st = self.arrays, self.state
@@ -275,8 +274,10 @@ class HierarchyTrainer(ft.FinetunePhase):
             warm = self.engine.warm_start(learner, ft.bank_rows(a.bank, self._options()))
             learner = select_seeds(self._mask(tuning), warm, learner)
         fresh = SeedState(self.engine.reset(k_reset, starts), learner, k_run)
-        keys, state = select_seeds(self._mask(seeds), (keys, fresh), (a.keys, a.state))
-        self.arrays = a.replace(keys=keys, state=state)
+        empty = SuccessWindow.empty(len(self.seeds), self.cfg.window_slots)  # a new level's
+        keys, state, window = select_seeds(self._mask(seeds), (keys, fresh, empty),
+                                           (a.keys, a.state, a.window))
+        self.arrays = a.replace(keys=keys, state=state, window=window)
         self._place()
         for s in seeds:
             self.state.start(s)
@@ -293,18 +294,17 @@ class HierarchyTrainer(ft.FinetunePhase):
         # clocks differ between processes, and saving is collective: process 0 decides
         return dist.agree(due) if self.cfg.checkpoint_every > 0 else due
 
-    def _account(self, stats) -> tuple[list[int], list[int]]:
-        """Count a chunk's episodes and steps and record the curves; the seeds whose running
-        success reached the threshold (levels), and the fine-tuning seeds whose task success
-        reached theirs."""
+    def _account(self, stats, windows) -> tuple[list[int], list[int]]:
+        """Count a chunk's episodes, steps and windows (learner's, task's: ``Engine._chunk``);
+        record the curves; the seeds whose running success reached the threshold (levels), and
+        the fine-tuning seeds whose task success reached theirs."""
         task_candidates = [s for s in self._training() if self._finetuning(s)
-                           and self._account_task(stats, s)]
+                           and self._account_task(stats, windows[1], s)]
         candidates = []
         steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
         for s in self._training():
             plan, cfg, seed, c = self._plan(s), self._level_cfg(s), self.seeds[s], self.state.level[s]
-            rows = c.count(stats.env_episodes[s], stats.learner_success[s],
-                           stats.learner_episodes[s], steps_per_update, cfg.success_window)
+            rows = c.count(stats.env_episodes[s], *(x[s] for x in windows[0]), steps_per_update)
             for episodes, env_steps, running in rows:
                 if not self._finetuning(s):  # (fine-tuning records the task's curve)
                     self.state.curves.append([seed, plan.level, plan.name, episodes, env_steps,

@@ -4,14 +4,16 @@
 bank and which options are learned). ``TrainerState`` is the host state the loop decides
 with: per seed its stage, the counters of the level (or fine-tuning turn) it trains
 (``LevelCounters``) and of fine-tuning (``FinetuneCounters``), and the run's records
-(results.json's levels, the curves). Both are stored in the layout of checkpoint format 2
+(results.json's levels, the curves). Both are stored in the layout of checkpoint format 3
 (the host state as JSON with one list over seeds per counter; the arrays by leaf
-position), so checkpoints of earlier versions resume.
+position), which is format 2's with the running-success windows moved from the host JSON
+(``history``, ``task_history``) into the arrays (``SuccessWindow``, the last leaves): a
+format-2 checkpoint is migrated on restore (``TrainArrays.migrated``).
 
-The running-success windows (``append_window``) are host lists of per-update
-[summed success, episodes] batches. They stay on the host: the success is averaged in
-float64 over whole updates, and a device window (float32 without ``jax_enable_x64``)
-would round differently and could move a threshold crossing.
+The running-success windows are ring buffers on the device, updated inside the compiled
+chunk after every update; the chunk returns, per update, which batches form the window
+(their float32 totals, newest first) and its episodes; the host keeps no window and only
+reduces those in float64 (``_Counters._count``), exactly as it did over its own lists.
 """
 from __future__ import annotations
 
@@ -20,49 +22,122 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 from flax import struct
+
+
+@struct.dataclass
+class SuccessWindow:
+    """A running-success window: the last K updates' batches (per update, the summed
+    success of the episodes it counted and their number), newest at ``next - 1`` (mod K).
+    Every stored batch holds at least one episode, so K batches always cover a window of
+    K episodes: K is the largest window the run uses, each call says its own ``size``.
+    Leading axes (seeds) are the caller's; ``push`` works on one window (vmap it)."""
+    total: jax.Array  # [..., K] float32 (0 in an empty slot)
+    count: jax.Array  # [..., K] int32 (0: an empty slot)
+    next: jax.Array   # [...] int32: the slot the next batch goes to
+
+    @classmethod
+    def empty(cls, num_seeds: int, slots: int) -> "SuccessWindow":
+        return cls(total=jnp.zeros((num_seeds, slots), jnp.float32),
+                   count=jnp.zeros((num_seeds, slots), jnp.int32),
+                   next=jnp.zeros((num_seeds,), jnp.int32))
+
+    @classmethod
+    def pair(cls, num_seeds: int, slots: int) -> dict:
+        """``TrainArrays``' two windows, empty."""
+        return {"window": cls.empty(num_seeds, slots), "task_window": cls.empty(num_seeds, slots)}
+
+    @classmethod
+    def from_lists(cls, histories: list[list], slots: int) -> "SuccessWindow":
+        """Windows holding these host lists of ``[total, count]`` batches, oldest first
+        (what checkpoint format 2 stored as ``history``/``task_history``: already trimmed
+        to the batches the window needs, so at most ``slots`` of them)."""
+        total = np.zeros((len(histories), slots), np.float32)
+        count = np.zeros((len(histories), slots), np.int32)
+        nxt = np.zeros((len(histories),), np.int32)
+        for s, history in enumerate(histories):
+            batches = history[-slots:]
+            for i, (t, c) in enumerate(batches):
+                # the old totals were float32 sums read as Python floats: exact in float32
+                total[s, i], count[s, i] = t, c
+            nxt[s] = len(batches) % slots
+        return cls(total=jnp.asarray(total), count=jnp.asarray(count), next=jnp.asarray(nxt))
+
+    def push(self, total: jax.Array, count: jax.Array, size: jax.Array):
+        """Add a batch of ``count`` episodes (none: nothing added) whose successes sum to
+        ``total``; returns the window and, over the most recent whole batches that hold at
+        least ``size`` episodes, their totals newest first ([K], 0 past the window) and
+        their episodes (0: fewer than ``size`` so far, no running success yet).
+
+        The sum is left to the host (``_Counters._count``): it adds these float32 totals
+        in float64, newest first, and divides, the very operations it ran over its own
+        lists before (format 2), so the running success is the same to the last bit and
+        so is every decision on it. A float32 sum on the device would be exact only for
+        integer batch totals, and successes are not always 0/1 (e.g. craft's make_stick
+        F_o): it moved curves' last digits."""
+        K = self.count.shape[-1]
+        add = count > 0
+        at = self.next
+        win = SuccessWindow(
+            total=jnp.where(add, self.total.at[at].set(total), self.total),
+            count=jnp.where(add, self.count.at[at].set(count), self.count),
+            next=jnp.where(add, (at + 1) % K, at))
+        # newest first; a batch belongs to the window while the newer ones hold < size
+        order = (win.next - 1 - jnp.arange(K)) % K
+        counts, totals = win.count[order], win.total[order]
+        newer = jnp.cumsum(counts) - counts
+        inside = newer < size
+        seen = jnp.where(inside, counts, 0).sum()
+        return win, (jnp.where(inside, totals, 0.0), jnp.where(seen >= size, seen, 0))
 
 
 @struct.dataclass
 class TrainArrays:
     """The device state, per seed (leading axis). The fields are in the order of the dict
-    that checkpoints of earlier versions were written from (leaves are stored by position)."""
+    that checkpoints of earlier versions were written from (leaves are stored by position;
+    the windows came last, in format 3, so a format-2 checkpoint's leaves are a prefix)."""
     bank: Any      # the policy bank: params [S, num_options, ...]
     keys: jax.Array
     learned: jax.Array  # [S, num_options] bool
     state: Any     # engine.SeedState: environments, learner, rollout key
+    window: Any = None       # SuccessWindow: the learner's, emptied when a level/turn starts
+    task_window: Any = None  # SuccessWindow: fine-tuning's whole-task episodes, all turns
 
+    def as_stored(self, version: int) -> "TrainArrays":
+        """The arrays a checkpoint of this format holds (format 2: no windows)."""
+        return self if version >= 3 else self.replace(window=None, task_window=None)
 
-def append_window(history: list, total: float, count: int, window: int) -> float | None:
-    """Add a batch of ``count`` episodes whose successes sum to ``total`` to ``history``
-    (trimmed in place to what the window needs); the mean success over the last
-    ``window`` episodes, whole batches (None: fewer so far)."""
-    if count:
-        history.append([total, count])
-    total, seen, keep = 0.0, 0, 0
-    for s, c in reversed(history):
-        total, seen, keep = total + s, seen + c, keep + 1
-        if seen >= window:
-            break
-    del history[:len(history) - keep]
-    return total / seen if seen >= window else None
+    def migrated(self, host: dict, slots: int) -> "TrainArrays":
+        """Arrays restored from a checkpoint with ``host`` state; a format-2 one (no window
+        arrays) gets its windows from its host lists."""
+        if self.window is not None:
+            return self
+        return self.replace(window=SuccessWindow.from_lists(host["history"], slots),
+                            task_window=SuccessWindow.from_lists(
+                                host["finetune"]["task_history"], slots))
 
 
 class _Counters:
     """Counters of gate attempts (``gate_success``, ``gate_attempts``, ``gate_env_steps``,
     ``gate_next``: the first chunk at which the next attempt may run), and of a chunk's
-    updates (``episodes``, ``env_steps``, a running-success window)."""
+    updates (``episodes``, ``env_steps``; the running success, read from the device's
+    window, ``SuccessWindow``)."""
 
-    def _count(self, history: list, episodes, success, counted, steps_per_update: int,
-               window: int) -> list[tuple[int, int, float | None]]:
-        """Per update (environment episodes, summed success, the episodes it counts):
-        count it, add it to ``history``; (episodes, env_steps, running success) after it."""
+    def _count(self, episodes, totals, seen, steps_per_update: int
+               ) -> list[tuple[int, int, float | None]]:
+        """Per update (environment episodes; the window's batch totals, newest first, and
+        its episodes, 0 while not full: ``SuccessWindow.push``): count it; (episodes,
+        env_steps, running success) after it."""
         rows = []
-        for e, total, n in zip(episodes, success, counted):
+        for e, batches, n in zip(episodes, totals, seen):
             self.episodes += int(e)
             self.env_steps += steps_per_update
-            rows.append((self.episodes, self.env_steps,
-                         append_window(history, float(total), int(n), window)))
+            # a sequential float64 sum, newest first (cumsum does not pair up terms): the
+            # old lists' arithmetic on the same float32 totals (zeros past the window add 0)
+            total = float(np.cumsum(np.asarray(batches, np.float64))[-1])
+            rows.append((self.episodes, self.env_steps, total / int(n) if n else None))
         return rows
 
     def record_gate(self, result: dict, s: int, next_chunk: int) -> float:
@@ -80,20 +155,18 @@ class LevelCounters(_Counters):
     """One seed's counters in the level (or fine-tuning turn) it trains."""
     episodes: int = 0
     env_steps: int = 0
-    history: list = field(default_factory=list)  # the learner's success window
-    running: float | None = None  # its running success (None: window not full yet)
+    running: float | None = None  # the learner's running success (None: window not full yet)
     reached: bool = False
     gate_success: float | None = None
     gate_attempts: int = 0
     gate_env_steps: int = 0
     gate_next: int = 0
 
-    def count(self, episodes, success, learner_episodes, steps_per_update: int,
-              window: int) -> list[tuple[int, int, float | None]]:
-        """Count a chunk's updates (per update: environment episodes, the learner's summed
-        success and its episodes); per update, (episodes, env_steps, running) after it."""
-        rows = self._count(self.history, episodes, success, learner_episodes, steps_per_update,
-                           window)
+    def count(self, episodes, totals, seen, steps_per_update: int
+              ) -> list[tuple[int, int, float | None]]:
+        """Count a chunk's updates (per update: environment episodes, the learner window's
+        batch totals and episodes); per update, (episodes, env_steps, running) after it."""
+        rows = self._count(episodes, totals, seen, steps_per_update)
         self.running = rows[-1][2] if rows else self.running
         return rows
 
@@ -104,7 +177,6 @@ class FinetuneCounters(_Counters):
     turn: int = 0               # turns started (the option is the turn's, round robin)
     episodes: int = 0           # environment episodes of the phase's training chunks
     env_steps: int = 0
-    task_history: list = field(default_factory=list)  # whole-task episodes' window
     task_running: float | None = None  # teleport-free task success over the window
     gate_success: float | None = None
     gate_attempts: int = 0
@@ -114,12 +186,11 @@ class FinetuneCounters(_Counters):
     success_before: float | None = None  # final_success as the levels left the hierarchy
     turns: list = field(default_factory=list)  # [{"template", "episodes", "running_success"}]
 
-    def count(self, episodes, success, task_episodes, steps_per_update: int,
-              window: int) -> list[tuple[int, int, float | None]]:
-        """Count a fine-tuning chunk's updates; per update, (episodes, env_steps,
-        task_running) after it."""
-        rows = self._count(self.task_history, episodes, success, task_episodes,
-                           steps_per_update, window)
+    def count(self, episodes, totals, seen, steps_per_update: int
+              ) -> list[tuple[int, int, float | None]]:
+        """Count a fine-tuning chunk's updates (the task window's batches); per update,
+        (episodes, env_steps, task_running) after it."""
+        rows = self._count(episodes, totals, seen, steps_per_update)
         self.task_running = rows[-1][2] if rows else self.task_running
         return rows
 
@@ -174,7 +245,7 @@ class TrainerState:
         return {k: [getattr(c, k) for c in self.finetune] for k in FINETUNE_KEYS}
 
     def to_json(self) -> dict:
-        """The checkpoint's host state (the layout of format 2)."""
+        """The checkpoint's host state (format 3: format 2's layout without the windows)."""
         return {"stage": self.stage, "started": self.started, "levels": self.levels,
                 "curves": self.curves, "finetune": self.finetune_record(),
                 "compile_seconds": self.compile_seconds, "wall_seconds": self.wall_seconds,
@@ -183,6 +254,8 @@ class TrainerState:
 
     @classmethod
     def from_json(cls, host: dict) -> "TrainerState":
+        """From format 3's host state, or format 2's (its windows, ``history`` and
+        ``task_history``, are left to ``SuccessWindow.from_lists``)."""
         seeds = range(len(host["stage"]))
         ft = host["finetune"]
         return cls(stage=list(host["stage"]), started=list(host["started"]),
