@@ -50,14 +50,19 @@ def time_engine_chunk(env, params, hierarchy, cfg, learner_name: str, learned_na
         learned = learned.at[:, hierarchy.option_index(name)].set(True)
     learner_id = jnp.full((num_seeds,), hierarchy.option_index(learner_name), jnp.int32)
     active = jnp.ones((num_seeds,), bool)
+    # a level's per-seed switches: teleports on, episodes reset with the learner's option,
+    # no side costs, the run's discount (the running-success windows are left out)
+    switches = (jnp.ones((num_seeds,), bool), jnp.zeros((num_seeds,), bool),
+                jnp.zeros((num_seeds,), jnp.float32), jnp.full((num_seeds,), cfg.gamma, jnp.float32))
+    args = (active, bank, learned, learner_id, start) + switches
     t0 = time.perf_counter()
-    compiled = engine.chunk.lower(state, active, bank, learned, learner_id, start).compile()
+    compiled = engine.chunk.lower(state, *args).compile()
     compile_s = time.perf_counter() - t0
     runs = []
     decisions = 0
     for _ in range(repeats):
         t0 = time.perf_counter()
-        state, stats, metrics = compiled(state, active, bank, learned, learner_id, start)
+        state, stats, metrics = compiled(state, *args)[:3]
         jax.block_until_ready(state)
         runs.append(time.perf_counter() - t0)
         decisions = int(jnp.sum(metrics["decisions"]))

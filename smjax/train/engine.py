@@ -8,7 +8,6 @@ templates, masked per option). Seeds are a leading ``vmap`` axis.
 from __future__ import annotations
 
 import time
-from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, NamedTuple
 
 import jax
@@ -92,7 +91,6 @@ class Engine:
                      in_axes=(0, 0, 0, 0, 0, 0, None, None, None, 0, 0, None)),
             static_argnums=(11,))
         self._compiled_episodes: dict[tuple, Any] = {}
-        self._compiling: dict[tuple, Future] = {}  # episodes programs compiling in the background
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         self._warm = jax.jit(jax.vmap(agent.warm_start))
         # jitted, so it also slices a bank sharded over processes
@@ -248,29 +246,18 @@ class Engine:
         return (num_envs,) + tuple((x.shape, x.dtype, getattr(x, "sharding", None))
                                    for x in jax.tree.leaves(args))
 
-    def compile_episodes_beside(self, args: tuple, num_envs: int) -> None:
-        """Start compiling the episodes program for these arguments' shapes in a background
-        thread (XLA compiles outside Python's lock): the caller compiles the training chunk
-        meanwhile, and on a 2-core CPU the two compiles overlap instead of adding up (a
-        quarter to a third of a run's compile time: benchmarks/RESULTS.md, section 12)."""
-        sig = self._signature(args, num_envs)
-        if sig in self._compiled_episodes or sig in self._compiling:
-            return
-        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="smjax-compile")
-        self._compiling[sig] = pool.submit(lambda: self.episodes.lower(*args, num_envs).compile())
-        pool.shutdown(wait=False)  # the thread ends with its compile
-
     def _run_episodes(self, args: tuple, num_envs: int) -> tuple[dict, float]:
         """Call the (once compiled, per ``num_envs``) episodes program; returns its result
-        and the seconds this call spent compiling it, or waiting for a background compile
-        (0 when already compiled)."""
+        and the seconds this call spent compiling it (0 when already compiled).
+
+        (Compiled when first needed, not in a thread beside the training chunk's compile:
+        on the 2-core CPU the two compiles at once took 1.17x as long as one after the
+        other, XLA:CPU's compile already using both cores: benchmarks/RESULTS.md 12.)"""
         sig = self._signature(args, num_envs)
         compile_s = 0.0
         if sig not in self._compiled_episodes:
             t0 = time.perf_counter()
-            pending = self._compiling.pop(sig, None)
-            self._compiled_episodes[sig] = (pending.result() if pending is not None
-                                            else self.episodes.lower(*args, num_envs).compile())
+            self._compiled_episodes[sig] = self.episodes.lower(*args, num_envs).compile()
             compile_s = time.perf_counter() - t0
         return self._compiled_episodes[sig](*args), compile_s
 

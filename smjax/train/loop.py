@@ -218,7 +218,6 @@ class HierarchyTrainer(ft.FinetunePhase):
         args = (a.state, active, a.bank, a.learned, learner, start, teleport, keep, side_cost,
                 gamma, (a.window, a.task_window), sizes)
         if self._compiled is None:  # one compile serves every level (ids are traced)
-            self._compile_episodes_beside()
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()
             self.state.compile_seconds += time.perf_counter() - t0
@@ -322,19 +321,6 @@ class HierarchyTrainer(ft.FinetunePhase):
         c = self.state.level[s]
         return c.episodes >= cfg.max_episodes_per_level or bool(
             cfg.max_steps_per_level and c.env_steps >= cfg.max_steps_per_level)
-
-    def _compile_episodes_beside(self) -> None:
-        """Have the gate's and evaluation's episodes program compile in the background
-        while the training chunk compiles (its arguments' shapes are known now)."""
-        S, a, engine = len(self.seeds), self.arrays, self.engine
-        if self.cfg.gate:
-            zeros = [0] * S
-            engine.compile_episodes_beside(engine.gate_args(
-                a.keys, a.state, a.bank, a.learned, zeros, zeros, [False] * S,
-                [self.cfg.threshold] * S, place=self._place_small), self.cfg.gate_envs)
-        engine.compile_episodes_beside(
-            engine.evaluate_args(a.keys, a.bank, a.learned, place=self._place_small),
-            self.cfg.eval_envs)
 
     def _accept(self, candidates: list[int]) -> list[int]:
         """Seeds (of ``candidates``, whose running success reached the threshold) whose
