@@ -118,6 +118,7 @@ def _numbers(res):
     return levels, res["final_success"], res["episodes_to_threshold"]
 
 
+@pytest.mark.slow  # ~60 s: two trainings; the tests below check what success= changes
 def test_a_success_equal_to_the_default_gives_identical_numbers():
     """KeyDoor reports no info["success"], so the root's success is the episode return: 1
     exactly where the door ends the episode open. Declaring that as success= changes nothing."""

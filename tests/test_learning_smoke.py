@@ -11,6 +11,7 @@ TINY = dict(algo="dqn", num_envs=4, rollout_ticks=8, updates_per_chunk=1, max_ep
             agent={"learning_starts": 8, "buffer_capacity": 256, "batch_size": 8})
 
 
+@pytest.mark.slow  # ~60 s; DQN through the engine also runs in test_train / test_finetune
 def test_football_top_down_dqn_smoke():
     res = run("football/11v11_hard", TrainConfig(**TINY, eval_max_ticks=200), [0], progress=False,
               env_overrides={"game_length": 200})

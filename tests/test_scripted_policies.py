@@ -186,6 +186,7 @@ def test_policies_are_validated():
         declare(env, "open_door", children, policies=[always(0)])
 
 
+@pytest.mark.slow  # ~60 s compiling MJX; the runner's scripted path is tested on KeyDoor above
 def test_fetch_scripted_hierarchy_stacks_blocks():
     """Fetch's ``scripted`` hierarchy, played by the runner with no agent, stacks two
     blocks (a random root scores about 0.5 or less: the scripts place them, bottom up)."""
