@@ -181,9 +181,8 @@ class HierarchyRunner:
         """One primitive step for every environment (leading axis B).
 
         ``learner_state`` is what the agent's ``act`` takes; where the learner acts frozen
-        (``Controls.acts_frozen``)
-        only its ``params`` are read, and it may be None where nobody learns
-        (``controls.learner`` is NO_OPTION: evaluation needs no learner). A runner built
+        (``Controls.acts_frozen``) only its ``params`` are read, and it may be None where
+        nobody learns (``controls.learner`` is NO_OPTION: evaluation needs no learner). A runner built
         without an agent (``agent=None``: every decision scripted) takes None for
         ``learner_state`` and ``bank_params``, nobody learns and nothing is learned.
         """

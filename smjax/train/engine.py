@@ -272,14 +272,6 @@ class Engine:
         puts the small per-call inputs where the caller's mesh needs them (every input
         must be global across processes). ``learner_state`` is not needed (nobody learns in
         evaluation); where given, only its params are passed (they are never run)."""
-        args = self.evaluate_args(keys, bank, learned, learner_state, place, policy=policy,
-                                  due=due, threshold=threshold)
-        return self._run_episodes(args, self.cfg.eval_envs)
-
-    def evaluate_args(self, keys, bank, learned, learner_state=None, place=_same, *,
-                      policy: str | None = None, due: list[bool] | None = None,
-                      threshold: float | None = None) -> tuple:
-        """The episodes program's arguments for an evaluation (see ``evaluate``)."""
         S = keys.shape[0]
         policy = self.frozen_policy if policy is None else policy
         if policy not in EVAL_TEMPERATURES:
@@ -294,7 +286,8 @@ class Engine:
         # the program (shared with the gate) takes learner params; with none, option 0's
         # bank entry has their shapes (the bank is built from the learners' params)
         params = self._bank_entry0(bank) if learner_state is None else learner_state.params
-        return (keys, params, bank, learned, learner, start) + flags + (skip, decide)
+        args = (keys, params, bank, learned, learner, start) + flags + (skip, decide)
+        return self._run_episodes(args, self.cfg.eval_envs)
 
     def gate(self, keys, state: SeedState, bank, learned, learners: list[int],
              starts: list[int], due: list[bool], thresholds: list[float],
@@ -302,14 +295,6 @@ class Engine:
         """Each seed's learner as it will be frozen, called where the levels above call it
         (``keys``: per seed, varied between attempts by the caller; a seed not ``due`` is
         skipped); a seed's episodes stop once passing its threshold or not is certain."""
-        args = self.gate_args(keys, state, bank, learned, learners, starts, due, thresholds,
-                              place)
-        return self._run_episodes(args, self.cfg.gate_envs)
-
-    def gate_args(self, keys, state: SeedState, bank, learned, learners: list[int],
-                  starts: list[int], due: list[bool], thresholds: list[float],
-                  place=_same) -> tuple:
-        """The episodes program's arguments for a gate attempt (see ``gate``)."""
         # a template's success is its F_o (0 or 1); the root's is the task's
         bounded = [o != 0 or self.success_bounded for o in learners]
         decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
@@ -319,4 +304,5 @@ class Engine:
         flags = place((jnp.asarray(True), jnp.asarray(temperature, jnp.float32),
                        jnp.asarray(self.cfg.gate_max_ticks)))
         learner, start, skip, decide = per_seed
-        return (keys, state.learner.params, bank, learned, learner, start) + flags + (skip, decide)
+        args = (keys, state.learner.params, bank, learned, learner, start) + flags + (skip, decide)
+        return self._run_episodes(args, self.cfg.gate_envs)
