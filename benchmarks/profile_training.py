@@ -119,6 +119,12 @@ def profile(args) -> dict:
              "side_cost": jnp.zeros((S,), jnp.float32),
              "gamma": jnp.full((S,), cfg.gamma, jnp.float32)}
     takes = inspect.signature(engine._chunk).parameters
+    if "windows" in takes:  # the running-success windows the trainer pushes every update
+        from smjax.train.state import SuccessWindow
+
+        pair = SuccessWindow.pair(S, cfg.window_slots)
+        level["windows"] = (pair["window"], pair["task_window"])
+        level["sizes"] = jnp.tile(jnp.asarray([cfg.success_window, 0], jnp.int32), (S, 1))
     switches = tuple(v for k, v in level.items() if k in takes)
     record("chunk", lambda st: chunk(st, active, bank, learned, learners, starts, *switches)[1],
            (state,))
