@@ -47,7 +47,8 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     summary, rows = [], ["task,method,seed,level,template,episodes,env_steps,running_success"]
     table = ["| task | method | episodes to 0.8 (mean +- std, reached) | env steps | final_success (no teleports) "
-             "| wall s | compile s | paper (option templates) | paper (curriculum) |", "|---|---|---|---|---|---|---|---|---|"]
+             "| before fine-tuning | total episodes (with fine-tuning) | wall s | compile s "
+             "| paper (option templates) | paper (curriculum) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for task in args.tasks:
         run_dirs = []
         for method in args.methods:
@@ -63,11 +64,13 @@ def main() -> None:
             run_dirs.append(run_dir)
             for line in (run_dir / "curves.csv").read_text().splitlines()[1:]:
                 rows.append(f"{task},{method},{line}")
-            fs = res["final_success"]
+            fs, ft = res["final_success"], res.get("finetune")
+            before = "{:.2f} +- {:.2f}".format(*mean_std(ft["final_success_before"])) if ft else "-"
             paper = PAPER.get(task)
             table.append(
                 f"| {task} | {method} | {reached_summary(res['episodes_to_threshold'])} | {reached_summary(res['env_steps_to_threshold'])} "
-                f"| {'{:.2f} +- {:.2f}'.format(*mean_std(fs))} | {res['wall_seconds']:.0f} "
+                f"| {'{:.2f} +- {:.2f}'.format(*mean_std(fs))} | {before} "
+                f"| {'{:,.0f} +- {:,.0f}'.format(*mean_std(res['total_episodes']))} | {res['wall_seconds']:.0f} "
                 f"| {res['compile_seconds']:.0f} | {f'{paper[0]:,} +- {paper[1]:,}' if paper else '-'} "
                 f"| {PAPER_CURRICULUM.get(task, '-')} |")
             print(table[-1], flush=True)

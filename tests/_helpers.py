@@ -18,9 +18,27 @@ def lose_machine_after_save(monkeypatch, when) -> None:
     monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
 
 
+def as_format_3(out, bank_leaves: int) -> None:
+    """Rewrite the checkpoint in ``out`` as smjax wrote it before it kept the levels' bank
+    for fine-tuning (checkpoint format 3): that bank's ``bank_leaves`` leaves, the last
+    ones, dropped."""
+    import orbax.checkpoint as ocp
+
+    from smjax.train import checkpoint as ckpt
+
+    info = ckpt.load_meta(out)
+    leaves = ocp.StandardCheckpointer().restore(ckpt.checkpoint_dir(out) / info["path"])
+    n = max(int(k) for k in leaves) + 1
+    arrays = [leaves[str(i)] for i in range(n - bank_leaves)]
+    host = info["meta"]["host"]
+    for key in ("check_success", "kept", "baseline"):
+        host["finetune"].pop(key)
+    ckpt.save_checkpoint(out, info["step"], arrays, info["meta"] | {"format": 3})
+
+
 def as_format_2(out, window: int) -> None:
-    """Rewrite the checkpoint in ``out`` as smjax wrote it before the running-success
-    windows were arrays (checkpoint format 2): the window arrays (the last leaves) dropped,
+    """Rewrite the format-3 checkpoint in ``out`` (``as_format_3``) as smjax wrote it before
+    the running-success windows were arrays (format 2): the window arrays (the last leaves) dropped,
     each window as the host list of ``[total, count]`` batches that format kept (oldest
     first, trimmed to the most recent batches holding ``window`` episodes)."""
     import numpy as np

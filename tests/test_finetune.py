@@ -1,4 +1,5 @@
 """Fine-tuning: after the levels, the learned hierarchy keeps learning without teleports."""
+import copy
 import dataclasses
 import shutil
 
@@ -9,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from _helpers import MachineLost, as_format_2, lose_machine_after_save
+from _helpers import MachineLost, as_format_2, as_format_3, lose_machine_after_save
 from hier_env import KeyDoor, make_keydoor
 from smjax.agents import make_agent
 from smjax.train import ConfigError, TrainConfig
@@ -96,6 +97,39 @@ SMALL = dict(num_envs=8, rollout_ticks=8, updates_per_chunk=2, success_window=32
              finetune_turn_episodes=80)
 
 
+def _banks_equal(a, b) -> bool:
+    return all(jax.tree.leaves(jax.tree.map(lambda x, y: bool((np.asarray(x) == np.asarray(y)).all()),
+                                            a, b)))
+
+
+@pytest.mark.parametrize("before", [2.0, -1.0])
+def test_the_phase_hands_back_the_better_hierarchy(monkeypatch, before):
+    # final_success_before forced above anything reachable (2.0) or below (-1.0): where no
+    # gate passed, the phase must hand back the levels' bank, or keep the fine-tuned one
+    from smjax.train.finetune import FinetunePhase
+
+    levels_banks = []
+    real = FinetunePhase._evaluate_before
+
+    def evaluate_before(self, seeds):
+        real(self, seeds)
+        for s in seeds:
+            self.state.finetune[s].success_before = before
+        if seeds:
+            levels_banks.append(jax.tree.map(np.asarray, self.arrays.bank))
+
+    monkeypatch.setattr(FinetunePhase, "_evaluate_before", evaluate_before)
+    cfg = TrainConfig(**(SMALL | {"finetune_threshold": 1.0}))  # no gate passes
+    res = run(make_keydoor(), cfg, [0], progress=False)
+    ft = res["finetune"]
+    assert ft["reached"] == [False] and ft["baseline"] == [True]
+    assert 0.0 <= ft["check_success"][0] <= 1.0
+    assert ft["gate_env_steps"][0] > 0  # the check's episodes are counted
+    assert ft["kept"] == (["levels"] if before > 1 else ["fine-tuned"])
+    assert len(levels_banks) == 1
+    assert _banks_equal(res["_raw"]["bank"], levels_banks[0]) == (before > 1)
+
+
 def test_without_finetuning_the_counts_are_the_levels():
     cfg = TrainConfig(**(SMALL | {"finetune": "off"}))
     res = run(make_keydoor(), cfg, [0], progress=False)
@@ -118,17 +152,32 @@ def test_resume_during_finetuning_is_exact(tmp_path, monkeypatch):
         run(make_keydoor(), cfg, [0, 1], out, progress=False)
     monkeypatch.undo()
     assert any(t >= 1 for t in ckpt.load_meta(out)["meta"]["host"]["finetune"]["turn"])
-    # the same checkpoint as the previous smjax wrote it (format 2: the windows as host
-    # lists) resumes as exactly: its windows are built from the lists
-    old = tmp_path / "format2"
-    shutil.copytree(out, old)
-    as_format_2(old, SMALL["success_window"])
-    host = ckpt.load_meta(old)["meta"]["host"]
+    # the same checkpoint as earlier smjax wrote it resumes: format 3 (no levels' bank) and
+    # format 2 (also the windows as host lists, from which its windows are built)
+    olds = {3: tmp_path / "format3", 2: tmp_path / "format2"}
+    bank_leaves = len(jax.tree.leaves(straight["_raw"]["bank"]))
+    for version, old in olds.items():
+        shutil.copytree(out, old)
+        as_format_3(old, bank_leaves)
+        if version == 2:
+            as_format_2(old, SMALL["success_window"])
+    host = ckpt.load_meta(olds[2])["meta"]["host"]
     assert any(host["finetune"]["task_history"]) and any(host["history"])
     resumed = run(make_keydoor(), cfg, [0, 1], out, progress=False, resume=True)
     assert _strip_timing(resumed) == _strip_timing(straight)
-    migrated = run(make_keydoor(), cfg, [0, 1], old, progress=False, resume=True)
-    assert _strip_timing(migrated) == _strip_timing(straight)
+    tuning = [s for s, stage in enumerate(host["stage"]) if stage >= 2]  # 2 levels, then FT
+    assert tuning
+    for old in olds.values():
+        migrated = _strip_timing(run(make_keydoor(), cfg, [0, 1], old, progress=False,
+                                     resume=True))
+        # a seed already fine-tuning lost its levels' bank: it keeps the fine-tuned one
+        assert [migrated["finetune"]["baseline"][s] for s in tuning] == [False] * len(tuning)
+        assert [migrated["finetune"]["kept"][s] for s in tuning] == ["fine-tuned"] * len(tuning)
+        expected = copy.deepcopy(_strip_timing(straight))
+        assert [expected["finetune"]["kept"][s] for s in tuning] == ["fine-tuned"] * len(tuning)
+        for key in ("check_success", "baseline", "gate_env_steps"):
+            migrated["finetune"].pop(key), expected["finetune"].pop(key)
+        assert migrated == expected
 
 
 @settings(max_examples=25, deadline=None)

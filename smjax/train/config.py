@@ -93,8 +93,13 @@ class TrainConfig:
         a pass at 0.9 landed below 0.9; the margin keeps it at or above).
       finetune_option_threshold: an option's running success (where the learned
         hierarchy calls it) that ends its turn early.
-      finetune_turn_episodes: environment episodes of one option's turn at most.
-      finetune_max_episodes: the phase's budget in environment episodes, per seed.
+      finetune_turn_episodes: environment episodes of one option's turn at most (250:
+        about one chunk; short turns let every option improve a little in each round, and
+        reached in 6,000-8,000 episodes what turns of 2,000 reached in 20,000:
+        benchmarks/RESULTS.md section 13).
+      finetune_max_episodes: the phase's budget in environment episodes, per seed (at
+        12,000, get_gem's and get_gold's totals with the levels stay under 21,000 and
+        19,000 episodes, and their final success is 0.03-0.04 lower: RESULTS section 13).
       finetune_side_cost: while fine-tuning, a template learner is also rewarded by the
         decrease of its template's ``side_cost`` where the environment defines one (Craft:
         items held beyond the one promised), so its run stops leaving behind what the task's
@@ -131,7 +136,7 @@ class TrainConfig:
     finetune: str = "auto"
     finetune_threshold: float = 0.92
     finetune_option_threshold: float = 0.95
-    finetune_turn_episodes: int = 2_000
+    finetune_turn_episodes: int = 250
     finetune_max_episodes: int = 20_000
     finetune_side_cost: bool = True
     finetune_side_cost_weight: float = 1.0

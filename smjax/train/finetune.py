@@ -21,6 +21,12 @@ teleport-free running success is known after every update: once it reaches
 ``finetune_threshold`` a gate (fresh episodes of the hierarchy with the learner frozen
 in, no teleports) decides, and the phase ends when it passes or after
 ``finetune_max_episodes``.
+
+Where no gate passed, the phase hands back the better of two hierarchies: the fine-tuned
+one is evaluated on fresh teleport-free episodes (counted as gate episodes) and, if it
+scores below the levels' hierarchy (``final_success_before``), the levels' bank is put
+back. Fine-tuning is not guaranteed to improve a hierarchy: on Fetch, DQN fine-tuning
+turns took the learned hierarchy from 0.74 to 0.23 (benchmarks/RESULTS.md section 13).
 """
 from __future__ import annotations
 
@@ -29,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.train import distributed as dist
-from smjax.train.seed_arrays import fold_in, freeze
+from smjax.train.seed_arrays import fold_in, freeze, local, select_seeds
 
 
 @jax.jit
@@ -109,11 +115,13 @@ class FinetunePhase:
         return phase, turn
 
     def _finish_turns(self, seeds: list[int], phase_ended: list[int]) -> None:
-        """Freeze these seeds' learners back into the bank; the next turn, or done."""
+        """Freeze these seeds' learners back into the bank; the next turn, or done (the
+        phase then hands back the better bank: ``_keep_better``)."""
         if not seeds:
             return
         st = self.state
         self._freeze_learners(seeds)
+        self._keep_better(phase_ended)
         for s in seeds:
             st.finetune[s].turns.append({"template": self._plan(s).name,
                                          "episodes": st.level[s].episodes,
@@ -124,17 +132,48 @@ class FinetunePhase:
                 st.finetune[s].turn += 1
             st.started[s] = False
 
-    def _evaluate_before(self, seeds: list[int]) -> None:
-        """final_success of these seeds' hierarchies as the levels left them."""
-        if not seeds:
-            return
+    def _evaluate_bank(self, seeds: list[int], fold: int) -> dict:
+        """These seeds' hierarchies as the bank holds them, on fresh teleport-free episodes
+        (``fold``: a key fold no gate uses; gates fold in the chunk count)."""
         S, a = len(self.seeds), self.arrays
-        # a fold no gate uses (gates fold in the chunk count)
-        keys = fold_in(a.keys, jnp.asarray(np.iinfo(np.uint32).max, jnp.uint32))
+        keys = fold_in(a.keys, jnp.asarray(fold, jnp.uint32))
         result, compile_s = self.engine.evaluate(
             keys, a.bank, a.learned, place=self._place_small,
             due=[s in seeds for s in range(S)])
         self.state.compile_seconds += compile_s
-        result = dist.gather(result)
+        return dist.gather(result)
+
+    def _evaluate_before(self, seeds: list[int]) -> None:
+        """final_success of these seeds' hierarchies as the levels left them; their banks
+        are kept (``TrainArrays.levels_bank``) for ``_keep_better``."""
+        if not seeds:
+            return
+        result = self._evaluate_bank(seeds, np.iinfo(np.uint32).max)
+        a = jax.tree.map(local, self.arrays)
+        self.arrays = a.replace(levels_bank=select_seeds(self._mask(seeds), a.bank, a.levels_bank))
+        self._place()
         for s in seeds:
             self.state.finetune[s].success_before = float(result["success"][s])
+            self.state.finetune[s].baseline = True
+
+    def _keep_better(self, seeds: list[int]) -> None:
+        """Seeds whose phase ends: where no gate passed, evaluate the fine-tuned hierarchy
+        and put the levels' bank back if it scored higher before fine-tuning."""
+        recs = self.state.finetune
+        for s in seeds:
+            recs[s].kept = "fine-tuned"
+        check = [s for s in seeds if not recs[s].reached and recs[s].baseline]
+        if not check:
+            return
+        result = self._evaluate_bank(check, np.iinfo(np.uint32).max - 1)
+        worse = []
+        for s in check:
+            recs[s].check_success = float(result["success"][s])
+            recs[s].gate_env_steps += int(result["env_steps"][s])
+            if recs[s].check_success < recs[s].success_before:
+                recs[s].kept = "levels"
+                worse.append(s)
+        if worse:
+            a = jax.tree.map(local, self.arrays)
+            self.arrays = a.replace(bank=select_seeds(self._mask(worse), a.levels_bank, a.bank))
+            self._place()

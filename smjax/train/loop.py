@@ -34,7 +34,7 @@ from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 
 
 # 2: learner states carry their hyper-parameters (state.hp); 3: success windows are arrays
-CHECKPOINT_FORMAT = 3
+CHECKPOINT_FORMAT = 4
 
 
 class NonFiniteError(FloatingPointError):
@@ -66,11 +66,13 @@ class HierarchyTrainer(ft.FinetunePhase):
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
         keys, k_init, k_reset = split_seeds(keys, 3)
         learner = self._init_learner(k_init)
+        bank = engine.new_bank(learner)
         self.arrays = TrainArrays(
-            bank=engine.new_bank(learner), keys=keys,
+            bank=bank, keys=keys,
             learned=jnp.zeros((S, engine.h.num_options), bool),
             state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
-            **SuccessWindow.pair(S, self.cfg.window_slots))
+            **SuccessWindow.pair(S, self.cfg.window_slots),
+            levels_bank=jax.tree.map(jnp.copy, bank) if self.ft_order else None)
         self.state = TrainerState.new(plans, S)
         self._compiled = None
         self._last_save = time.perf_counter()
@@ -112,7 +114,8 @@ class HierarchyTrainer(ft.FinetunePhase):
         self._last_save = time.perf_counter()
 
     def restore(self) -> bool:
-        """Resume from process 0's checkpoint (format 2 is migrated); the same on every process."""
+        """Resume from process 0's checkpoint (formats 2 and 3 are migrated); the same on
+        every process."""
         info = ckpt.shared_meta(self.out_dir) if self.out_dir is not None else None
         if info is None:
             return False
@@ -124,7 +127,8 @@ class HierarchyTrainer(ft.FinetunePhase):
             loaded = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
         else:
             loaded = ckpt.load_arrays(self.out_dir, like)
-        self.arrays = loaded.migrated(info["meta"]["host"], self.cfg.window_slots)
+        self.arrays = loaded.migrated(info["meta"]["host"], self.cfg.window_slots,
+                                      levels_bank=self.arrays.levels_bank is not None)
         self.state = TrainerState.from_json(info["meta"]["host"])
         self._place()
         return True

@@ -119,7 +119,10 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
 
 def _finetune_summary(record: dict | None, config: dict) -> dict | None:
     """results.json's "finetune": per seed, the phase's training episodes and env steps,
-    its gate env steps, whether its gate passed, final_success before it, its turns."""
+    its gate env steps, whether its gate passed, final_success before it, its turns; where
+    no gate passed, the fine-tuned hierarchy's check (``check_success``) and which one the
+    phase handed back (``kept``: "fine-tuned" or "levels", the better of the two;
+    ``baseline`` False: the levels' bank was lost to a resume from an older checkpoint)."""
     if record is None:
         return None
     return {
@@ -132,6 +135,9 @@ def _finetune_summary(record: dict | None, config: dict) -> dict | None:
         "reached": list(record["reached"]),
         "task_running_success": list(record["task_running"]),
         "final_success_before": list(record["success_before"]),
+        "check_success": list(record["check_success"]),
+        "kept": list(record["kept"]),
+        "baseline": list(record["baseline"]),
         "turns": [list(t) for t in record["turns"]],
     }
 

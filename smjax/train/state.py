@@ -97,26 +97,38 @@ class SuccessWindow:
 class TrainArrays:
     """The device state, per seed (leading axis). The fields are in the order of the dict
     that checkpoints of earlier versions were written from (leaves are stored by position;
-    the windows came last, in format 3, so a format-2 checkpoint's leaves are a prefix)."""
+    the windows came last in format 3, the levels' bank in format 4, so an older
+    checkpoint's leaves are a prefix)."""
     bank: Any      # the policy bank: params [S, num_options, ...]
     keys: jax.Array
     learned: jax.Array  # [S, num_options] bool
     state: Any     # engine.SeedState: environments, learner, rollout key
     window: Any = None       # SuccessWindow: the learner's, emptied when a level/turn starts
     task_window: Any = None  # SuccessWindow: fine-tuning's whole-task episodes, all turns
+    levels_bank: Any = None  # the bank as the levels left it (fine-tuning may hand it back)
 
     def as_stored(self, version: int) -> "TrainArrays":
-        """The arrays a checkpoint of this format holds (format 2: no windows)."""
-        return self if version >= 3 else self.replace(window=None, task_window=None)
-
-    def migrated(self, host: dict, slots: int) -> "TrainArrays":
-        """Arrays restored from a checkpoint with ``host`` state; a format-2 one (no window
-        arrays) gets its windows from its host lists."""
-        if self.window is not None:
+        """The arrays a checkpoint of this format holds (format 2: no windows; 3: no
+        levels' bank)."""
+        if version >= 4:
             return self
-        return self.replace(window=SuccessWindow.from_lists(host["history"], slots),
-                            task_window=SuccessWindow.from_lists(
-                                host["finetune"]["task_history"], slots))
+        if version == 3:
+            return self.replace(levels_bank=None)
+        return self.replace(window=None, task_window=None, levels_bank=None)
+
+    def migrated(self, host: dict, slots: int, levels_bank: bool = False) -> "TrainArrays":
+        """Arrays restored from a checkpoint with ``host`` state: a format-2 one (no window
+        arrays) gets its windows from its host lists; where the trainer keeps a levels' bank
+        (``levels_bank``: fine-tuning is on), a format-2 or 3 one gets the bank as it is (a
+        seed already fine-tuning then has no baseline: ``FinetuneCounters.baseline``)."""
+        out = self
+        if out.window is None:
+            out = out.replace(window=SuccessWindow.from_lists(host["history"], slots),
+                              task_window=SuccessWindow.from_lists(
+                                  host["finetune"]["task_history"], slots))
+        if levels_bank and out.levels_bank is None:
+            out = out.replace(levels_bank=jax.tree.map(jnp.copy, out.bank))
+        return out
 
 
 class _Counters:
@@ -185,6 +197,13 @@ class FinetuneCounters(_Counters):
     reached: bool = False       # a gate passed
     success_before: float | None = None  # final_success as the levels left the hierarchy
     turns: list = field(default_factory=list)  # [{"template", "episodes", "running_success"}]
+    # where the gate never passed: the fine-tuned hierarchy's success on fresh episodes at
+    # the phase's end, and which bank the phase handed back ("fine-tuned" or "levels": the
+    # better of the two); baseline: the levels' bank was kept when the phase started (not
+    # where it started before a resume from a checkpoint of format 3 or older)
+    check_success: float | None = None
+    kept: str | None = None
+    baseline: bool = False
 
     def count(self, episodes, totals, seen, steps_per_update: int
               ) -> list[tuple[int, int, float | None]]:
@@ -257,10 +276,10 @@ class TrainerState:
         """From format 3's host state, or format 2's (its windows, ``history`` and
         ``task_history``, are left to ``SuccessWindow.from_lists``)."""
         seeds = range(len(host["stage"]))
-        ft = host["finetune"]
+        ft = host["finetune"]  # format 3 and older lack the keep-the-better counters
         return cls(stage=list(host["stage"]), started=list(host["started"]),
                    level=[LevelCounters(**{k: host[k][s] for k in LEVEL_KEYS}) for s in seeds],
-                   finetune=[FinetuneCounters(**{k: ft[k][s] for k in FINETUNE_KEYS})
+                   finetune=[FinetuneCounters(**{k: ft[k][s] for k in FINETUNE_KEYS if k in ft})
                              for s in seeds],
                    levels=host["levels"], curves=host["curves"],
                    compile_seconds=host["compile_seconds"], wall_seconds=host["wall_seconds"],
