@@ -18,6 +18,22 @@ def lose_machine_after_save(monkeypatch, when) -> None:
     monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
 
 
+def without_levels_bank(out) -> None:
+    """Drop the keep-the-better counters from the checkpoint in ``out`` (its arrays stay):
+    its seeds resume as from format 3 or older, a seed already fine-tuning without its
+    levels' bank."""
+    import orbax.checkpoint as ocp
+
+    from smjax.train import checkpoint as ckpt
+
+    info = ckpt.load_meta(out)
+    leaves = ocp.StandardCheckpointer().restore(ckpt.checkpoint_dir(out) / info["path"])
+    arrays = [leaves[str(i)] for i in range(max(int(k) for k in leaves) + 1)]
+    for key in ("check_success", "kept", "baseline"):
+        info["meta"]["host"]["finetune"].pop(key)
+    ckpt.save_checkpoint(out, info["step"], arrays, info["meta"])
+
+
 def as_format_3(out, bank_leaves: int) -> None:
     """Rewrite the checkpoint in ``out`` as smjax wrote it before it kept the levels' bank
     for fine-tuning (checkpoint format 3): that bank's ``bank_leaves`` leaves, the last
