@@ -33,7 +33,8 @@ from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
 from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 
 
-# 2: learner states carry their hyper-parameters (state.hp); 3: success windows are arrays
+# 2: learner states carry their hyper-parameters (state.hp); 3: success windows are arrays;
+# 4: the levels' bank (fine-tuning hands back the better hierarchy)
 CHECKPOINT_FORMAT = 4
 
 

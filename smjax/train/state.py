@@ -4,11 +4,12 @@
 bank and which options are learned). ``TrainerState`` is the host state the loop decides
 with: per seed its stage, the counters of the level (or fine-tuning turn) it trains
 (``LevelCounters``) and of fine-tuning (``FinetuneCounters``), and the run's records
-(results.json's levels, the curves). Both are stored in the layout of checkpoint format 3
+(results.json's levels, the curves). Both are stored in the layout of checkpoint format 4
 (the host state as JSON with one list over seeds per counter; the arrays by leaf
-position), which is format 2's with the running-success windows moved from the host JSON
-(``history``, ``task_history``) into the arrays (``SuccessWindow``, the last leaves): a
-format-2 checkpoint is migrated on restore (``TrainArrays.migrated``).
+position). Format 3 had no levels' bank (``TrainArrays.levels_bank``, the last leaves)
+nor the keep-the-better counters; format 2 also kept the running-success windows in the
+host JSON (``history``, ``task_history``) instead of the arrays (``SuccessWindow``). Both
+are migrated on restore (``TrainArrays.migrated``, ``TrainerState.from_json``).
 
 The running-success windows are ring buffers on the device, updated inside the compiled
 chunk after every update; the chunk returns, per update, which batches form the window
@@ -264,7 +265,8 @@ class TrainerState:
         return {k: [getattr(c, k) for c in self.finetune] for k in FINETUNE_KEYS}
 
     def to_json(self) -> dict:
-        """The checkpoint's host state (format 3: format 2's layout without the windows)."""
+        """The checkpoint's host state (format 4: format 2's layout without the windows,
+        with the keep-the-better counters)."""
         return {"stage": self.stage, "started": self.started, "levels": self.levels,
                 "curves": self.curves, "finetune": self.finetune_record(),
                 "compile_seconds": self.compile_seconds, "wall_seconds": self.wall_seconds,
@@ -273,8 +275,8 @@ class TrainerState:
 
     @classmethod
     def from_json(cls, host: dict) -> "TrainerState":
-        """From format 3's host state, or format 2's (its windows, ``history`` and
-        ``task_history``, are left to ``SuccessWindow.from_lists``)."""
+        """From format 4's host state, or format 3's, or format 2's (its windows,
+        ``history`` and ``task_history``, are left to ``SuccessWindow.from_lists``)."""
         seeds = range(len(host["stage"]))
         ft = host["finetune"]  # format 3 and older lack the keep-the-better counters
         return cls(stage=list(host["stage"]), started=list(host["started"]),
