@@ -182,8 +182,8 @@ class HierarchyRunner:
 
         ``learner_state`` is what the agent's ``act`` takes; where the learner acts frozen
         (``Controls.acts_frozen``) only its ``params`` are read, and it may be None where
-        nobody learns (``controls.learner`` is NO_OPTION: evaluation needs no learner). A runner built
-        without an agent (``agent=None``: every decision scripted) takes None for
+        nobody learns (``controls.learner`` is NO_OPTION: evaluation needs no learner). A
+        runner built without an agent (``agent=None``: every decision scripted) takes None for
         ``learner_state`` and ``bank_params``, nobody learns and nothing is learned.
         """
         k_act, k_frozen, k_ctrl, k_tp, k_step, k_reset = jax.random.split(key, 6)

@@ -73,7 +73,7 @@ class HierarchyTrainer(ft.FinetunePhase):
             learned=jnp.zeros((S, engine.h.num_options), bool),
             state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
             **SuccessWindow.pair(S, self.cfg.window_slots),
-            levels_bank=jax.tree.map(jnp.copy, bank) if self.ft_order else None)
+            levels_bank=bank if self.ft_order else None)  # arrays are immutable: no copy
         self.state = TrainerState.new(plans, S)
         self._compiled = None
         self._last_save = time.perf_counter()

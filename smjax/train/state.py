@@ -128,7 +128,7 @@ class TrainArrays:
                               task_window=SuccessWindow.from_lists(
                                   host["finetune"]["task_history"], slots))
         if levels_bank and out.levels_bank is None:
-            out = out.replace(levels_bank=jax.tree.map(jnp.copy, out.bank))
+            out = out.replace(levels_bank=out.bank)
         return out
 
 
