@@ -76,6 +76,10 @@ def test_results_keep_the_contract(far_teleport_run):
         assert names[:2] == ["open_door", "give_key"][:len(names[:2])]
         assert all(t["episodes"] <= CFG["finetune_turn_episodes"] + 16 * 16 * 2
                    for t in ft["turns"][s])
+        # an option plays right after a turn that left it below the option threshold
+        for a, b in zip(ft["turns"][s], ft["turns"][s][1:]):
+            if a["template"] == "give_key" and (a["running_success"] or 0) < 0.95:
+                assert b["template"] == "open_door"
     assert res["eval_policy"] == "sample"
     assert set(res["final_success_by_policy"]) == {"greedy", "sample", "sample_t0.5"}
     assert res["final_success_by_policy"]["sample"] == res["final_success"]
@@ -87,7 +91,8 @@ def test_finetune_off_and_bad_values():
     assert not TrainConfig(finetune="off").finetune_on
     for field, value in (("finetune", "maybe"), ("finetune_threshold", 0.0),
                          ("finetune_option_threshold", 1.5), ("finetune_max_episodes", 0),
-                         ("finetune_turn_episodes", -3)):
+                         ("finetune_turn_episodes", -3), ("finetune_max_rest", -1),
+                         ("finetune_max_rest", 1.5)):
         with pytest.raises(ConfigError, match=field):
             TrainConfig(**{field: value})
 
@@ -179,6 +184,35 @@ def test_resume_during_finetuning_is_exact(tmp_path, monkeypatch):
     for old in olds.values():
         migrated = run(make_keydoor(), cfg, [0, 1], old, progress=False, resume=True)
         assert _strip_timing(migrated) == expected
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(1, 5), st.integers(0, 4), st.data())
+def test_converged_options_rest_at_most_max_rest_turns_in_a_row(num_options, max_rest, data):
+    from smjax.train.finetune import next_turn
+
+    order = [f"o{i}" for i in range(num_options)]
+    success = st.one_of(st.none(), st.floats(0, 1))
+    turns, rested, turn = [], {}, 0  # turn 0 (o0) is playing
+    played, skipped_in_a_row = [0], {name: 0 for name in order}
+    for _ in range(30):
+        turns.append({"template": order[turn % num_options], "episodes": 1,
+                      "running_success": data.draw(success)})
+        new = next_turn(turn, order, turns, rested, 0.95, max_rest)
+        assert new > turn
+        last = {t["template"]: t["running_success"] for t in turns}
+        for skipped in range(turn + 1, new):  # passed over: converged, and within its rests
+            name = order[skipped % num_options]
+            assert last.get(name) is not None and last[name] >= 0.95
+            skipped_in_a_row[name] += 1
+            assert skipped_in_a_row[name] <= max_rest
+        name = order[new % num_options]
+        skipped_in_a_row[name] = 0
+        assert rested[name] == 0
+        turn = new
+        played.append(turn)
+    if max_rest == 0:  # every option plays every round
+        assert played == list(range(31))
 
 
 @settings(max_examples=25, deadline=None)

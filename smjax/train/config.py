@@ -93,6 +93,12 @@ class TrainConfig:
         a pass at 0.9 landed below 0.9; the margin keeps it at or above).
       finetune_option_threshold: an option's running success (where the learned
         hierarchy calls it) that ends its turn early.
+      finetune_max_rest: turns in a row an option may sit out while it is converged: an
+        option whose last turn ended at ``finetune_option_threshold`` or above passes its
+        next turns to the others, up to this many in a row, then plays again to check that
+        it still holds where the hierarchy calls it (0: every option plays every round).
+        Once the children are converged most of the phase's episodes went to turns that
+        could not improve anything (RESULTS section 14).
       finetune_turn_episodes: environment episodes of one option's turn at most (250:
         about one chunk; short turns let every option improve a little in each round, and
         reached in 6,000-8,000 episodes what turns of 2,000 reached in 20,000:
@@ -137,6 +143,7 @@ class TrainConfig:
     finetune_threshold: float = 0.92
     finetune_option_threshold: float = 0.95
     finetune_turn_episodes: int = 250
+    finetune_max_rest: int = 3
     finetune_max_episodes: int = 20_000
     finetune_side_cost: bool = True
     finetune_side_cost_weight: float = 1.0
@@ -164,6 +171,8 @@ class TrainConfig:
             value = getattr(self, name)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, name,
                  "an integer >= 1")
+        need(isinstance(self.finetune_max_rest, int) and not isinstance(self.finetune_max_rest, bool)
+             and self.finetune_max_rest >= 0, "finetune_max_rest", "an integer >= 0")
         need(self.reset_pool is None or (isinstance(self.reset_pool, int)
                                          and not isinstance(self.reset_pool, bool)
                                          and self.reset_pool >= 0),

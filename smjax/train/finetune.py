@@ -16,7 +16,8 @@ frozen. Turns reuse the levels' compiled chunk (the option, teleports and episod
 continuation are traced per seed), so fine-tuning compiles nothing new and an update
 costs what a level's does. A turn ends once its option's running success reaches
 ``finetune_option_threshold`` or after ``finetune_turn_episodes``; its policy then goes
-back into the bank. Whole-task episodes end by themselves in every turn, so the task's
+back into the bank. An option whose turn ended at that threshold is converged: it rests
+(its next turns go to the others) for up to ``finetune_max_rest`` turns in a row. Whole-task episodes end by themselves in every turn, so the task's
 teleport-free running success is known after every update: once it reaches
 ``finetune_threshold`` a gate (fresh episodes of the hierarchy with the learner frozen
 in, no teleports) decides, and the phase ends when it passes or after
@@ -36,6 +37,27 @@ import numpy as np
 
 from smjax.train import distributed as dist
 from smjax.train.seed_arrays import fold_in, freeze, local, select_seeds
+
+
+def next_turn(turn: int, order: list[str], turns: list[dict], rested: dict[str, int],
+              threshold: float, max_rest: int) -> int:
+    """The turn index after ``turn`` (its option: ``order[index % len(order)]``), skipping
+    resting options; updates ``rested`` (template -> turns sat out in a row).
+
+    An option rests while its last turn (in ``turns``, the phase's record) ended with
+    running success >= ``threshold``, for at most ``max_rest`` turns in a row: then it
+    plays again, so an option whose callers have moved on is checked where they now call
+    it. Ends: each skip raises a counter that stops at ``max_rest``."""
+    last = {t["template"]: t["running_success"] for t in turns}
+    index = turn + 1
+    while True:
+        name = order[index % len(order)]
+        success = last.get(name)
+        if success is None or success < threshold or rested.get(name, 0) >= max_rest:
+            rested[name] = 0
+            return index
+        rested[name] = rested.get(name, 0) + 1
+        index += 1
 
 
 @jax.jit
@@ -129,7 +151,10 @@ class FinetunePhase:
             if s in phase_ended:
                 st.stage[s] += 1
             else:
-                st.finetune[s].turn += 1
+                rec = st.finetune[s]
+                rec.turn = next_turn(rec.turn, [p.name for p in self.ft_order], rec.turns,
+                                     rec.rested, self.cfg.finetune_option_threshold,
+                                     self.cfg.finetune_max_rest)
             st.started[s] = False
 
     def _evaluate_bank(self, seeds: list[int], fold: int) -> dict:

@@ -187,7 +187,8 @@ class LevelCounters(_Counters):
 @dataclass
 class FinetuneCounters(_Counters):
     """One seed's fine-tuning counters (its phase, over all its turns)."""
-    turn: int = 0               # turns started (the option is the turn's, round robin)
+    turn: int = 0               # turn index: the option is ``order[turn % len(order)]``
+    rested: dict = field(default_factory=dict)  # template -> turns sat out in a row
     episodes: int = 0           # environment episodes of the phase's training chunks
     env_steps: int = 0
     task_running: float | None = None  # teleport-free task success over the window
