@@ -107,10 +107,9 @@ def _banks_equal(a, b) -> bool:
                                             a, b)))
 
 
-@pytest.mark.parametrize("before", [2.0, -1.0])
-def test_the_phase_hands_back_the_better_hierarchy(monkeypatch, before):
-    # final_success_before forced above anything reachable (2.0) or below (-1.0): where no
-    # gate passed, the phase must hand back the levels' bank, or keep the fine-tuned one
+def _record_levels_bank(monkeypatch, before: float) -> list:
+    """Force final_success_before to ``before``; the returned list receives the levels'
+    bank as fine-tuning starts."""
     from smjax.train.finetune import FinetunePhase
 
     levels_banks = []
@@ -124,6 +123,14 @@ def test_the_phase_hands_back_the_better_hierarchy(monkeypatch, before):
             levels_banks.append(jax.tree.map(np.asarray, self.arrays.bank))
 
     monkeypatch.setattr(FinetunePhase, "_evaluate_before", evaluate_before)
+    return levels_banks
+
+
+@pytest.mark.parametrize("before", [2.0, -1.0])
+def test_the_phase_hands_back_the_better_hierarchy(monkeypatch, before):
+    # final_success_before forced above anything reachable (2.0) or below (-1.0): where no
+    # gate passed, the phase must hand back the levels' bank, or keep the fine-tuned one
+    levels_banks = _record_levels_bank(monkeypatch, before)
     cfg = TrainConfig(**(SMALL | {"finetune_threshold": 1.0}))  # no gate passes
     res = run(make_keydoor(), cfg, [0], progress=False)
     ft = res["finetune"]
@@ -133,6 +140,22 @@ def test_the_phase_hands_back_the_better_hierarchy(monkeypatch, before):
     assert ft["kept"] == (["levels"] if before > 1 else ["fine-tuned"])
     assert len(levels_banks) == 1
     assert _banks_equal(res["_raw"]["bank"], levels_banks[0]) == (before > 1)
+
+
+def test_finetune_agent_sets_the_turns_hyper_parameters(monkeypatch):
+    # at a learning rate of 0 no turn can move a parameter: the fine-tuned bank (kept, as
+    # before = -1 is below anything) is the levels' bank, while the levels did learn
+    levels_banks = _record_levels_bank(monkeypatch, -1.0)
+    cfg = TrainConfig(**(SMALL | {"finetune_threshold": 1.0,
+                                  "finetune_agent": {"learning_rate": 0.0}}))
+    res = run(make_keydoor(), cfg, [0], progress=False)
+    assert res["finetune"]["kept"] == ["fine-tuned"] and res["finetune"]["episodes"][0] > 0
+    assert _banks_equal(res["_raw"]["bank"], levels_banks[0])
+    with pytest.raises(ConfigError, match="finetune_agent.*'lr'.*learning_rate"):
+        run(make_keydoor(), TrainConfig(**(SMALL | {"finetune_agent": {"lr": 1e-3}})), [0],
+            progress=False)
+    with pytest.raises(ConfigError, match="finetune_agent"):
+        TrainConfig(finetune_agent={"learning_rate": "fast"})
 
 
 def test_without_finetuning_the_counts_are_the_levels():

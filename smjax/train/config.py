@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -96,9 +97,9 @@ class TrainConfig:
       finetune_max_rest: turns in a row an option may sit out while it is converged: an
         option whose last turn ended at ``finetune_option_threshold`` or above passes its
         next turns to the others, up to this many in a row, then plays again to check that
-        it still holds where the hierarchy calls it (0: every option plays every round).
-        Once the children are converged most of the phase's episodes went to turns that
-        could not improve anything (RESULTS section 14).
+        it still holds where the hierarchy calls it (0, the default: every option plays
+        every round). Measured neutral: at 3 the root gets twice the turns, yet get_gem's
+        and get_gold's task success climbs no faster per episode (RESULTS section 14).
       finetune_turn_episodes: environment episodes of one option's turn at most (250:
         about one chunk; short turns let every option improve a little in each round, and
         reached in 6,000-8,000 episodes what turns of 2,000 reached in 20,000:
@@ -106,6 +107,12 @@ class TrainConfig:
       finetune_max_episodes: the phase's budget in environment episodes, per seed (at
         12,000, get_gem's and get_gold's totals with the levels stay under 21,000 and
         19,000 episodes, and their final success is 0.03-0.04 lower: RESULTS section 13).
+      finetune_agent: learner hyper-parameters that fine-tuning turns use instead of
+        ``agent``'s (e.g. ``{"learning_rate": 1e-3}``); only those the learner keeps as
+        traced leaves (PPO: learning_rate, gae_lambda, clip_eps, ent_coef, vf_coef; DQN:
+        learning_rate, epsilon_end, epsilon_decay_steps, target_update_period, tau,
+        reward_scale; actor-critic: learning_rate, vf_coef, ent_coef), so the phase
+        reuses the levels' compiled chunk.
       finetune_side_cost: while fine-tuning, a template learner is also rewarded by the
         decrease of its template's ``side_cost`` where the environment defines one (Craft:
         items held beyond the one promised), so its run stops leaving behind what the task's
@@ -143,8 +150,9 @@ class TrainConfig:
     finetune_threshold: float = 0.92
     finetune_option_threshold: float = 0.95
     finetune_turn_episodes: int = 250
-    finetune_max_rest: int = 3
+    finetune_max_rest: int = 0
     finetune_max_episodes: int = 20_000
+    finetune_agent: dict = field(default_factory=dict)
     finetune_side_cost: bool = True
     finetune_side_cost_weight: float = 1.0
     level_side_cost_weight: float = 0.0
@@ -199,6 +207,10 @@ class TrainConfig:
             need(isinstance(value, (int, float)) and not isinstance(value, bool)
                  and 0 <= value <= 100, name, "a number in [0, 100]")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
+        need(isinstance(self.finetune_agent, dict) and all(
+            isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
+            and math.isfinite(v) for k, v in self.finetune_agent.items()),
+             "finetune_agent", "a mapping of learner hyper-parameter names to numbers")
         if "gamma" in self.agent:  # one source: the trainer discounts with TrainConfig.gamma
             raise ConfigError(f"agent field 'gamma' = {self.agent['gamma']!r} would be ignored: the "
                               f"discount is the config field 'gamma'; set it with --set gamma=X "

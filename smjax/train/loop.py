@@ -25,7 +25,7 @@ from smjax.train import checkpoint as ckpt
 from smjax.train import finetune as ft
 from smjax.train.seed_arrays import all_finite, fold_in, freeze, local, select_seeds, split_seeds
 from smjax.train import distributed as dist
-from smjax.train.config import RUN_SETTINGS, TrainConfig
+from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig
 from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
 from smjax.train.plans import LevelPlan, plan_levels
 from smjax.train.progress import Progress
@@ -67,6 +67,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
         keys, k_init, k_reset = split_seeds(keys, 3)
         learner = self._init_learner(k_init)
+        self.finetune_hp = self._finetune_hp(learner.hp)
         bank = engine.new_bank(learner)
         self.arrays = TrainArrays(
             bank=bank, keys=keys,
@@ -276,6 +277,7 @@ class HierarchyTrainer(ft.FinetunePhase):
         tuning = [s for s in seeds if self._finetuning(s)]
         if tuning:
             warm = self.engine.warm_start(learner, ft.bank_rows(a.bank, self._options()))
+            warm = warm.replace(hp={**warm.hp, **self.finetune_hp})
             learner = select_seeds(self._mask(tuning), warm, learner)
         fresh = SeedState(self.engine.reset(k_reset, starts), learner, k_run)
         empty = SuccessWindow.empty(len(self.seeds), self.cfg.window_slots)  # a new level's
@@ -285,6 +287,15 @@ class HierarchyTrainer(ft.FinetunePhase):
         self._place()
         for s in seeds:
             self.state.start(s)
+
+    def _finetune_hp(self, hp: dict) -> dict:
+        """``cfg.finetune_agent`` as the learner's per-slot hyper-parameter leaves."""
+        unknown = sorted(set(self.cfg.finetune_agent) - set(hp))
+        if unknown:
+            raise ConfigError(f"config field 'finetune_agent' names {unknown}, which the "
+                              f"{self.cfg.algo} learner does not read per turn; it reads "
+                              f"{sorted(hp)}")
+        return {k: jnp.full_like(hp[k], v) for k, v in self.cfg.finetune_agent.items()}
 
     def _init_learner(self, keys: jax.Array):
         """Fresh learners per slot, with each slot's swept hyper-parameters."""
