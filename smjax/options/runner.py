@@ -31,6 +31,7 @@ from smjax.options.carry import (  # noqa: F401 - re-exported: the runner's publ
     NO_OPTION, Controls, EnvCarry, EpisodeEnds, ResetPool, TickStats,
 )
 from smjax.options.hierarchy import Hierarchy, check_success
+from smjax.options.memory import make_memory
 from smjax.options.realise import families, primitive_action, run_family
 from smjax.options.stack import stack_init
 
@@ -47,7 +48,7 @@ class HierarchyRunner:
                  frozen_policy: str = "greedy", allow_teleport: bool = True,
                  reset_on_learner_end: bool = True, frozen_temperature: float = 1.0,
                  learner_acts_frozen: bool = False, reset_pool: int = 0,
-                 frozen_eval: str = "auto"):
+                 frozen_eval: str = "auto", policy_memory: str = "none"):
         if frozen_policy not in ("greedy", "sample"):
             raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {frozen_policy!r}")
         self.env, self.env_params, self.h, self.agent = env, env_params, hierarchy, agent
@@ -80,6 +81,9 @@ class HierarchyRunner:
         self.has_teleport = np.array([False] + [t.teleport is not None for t in tpls])
         self.has_controller = np.array([False] + [t.controller is not None for t in tpls])
         space = env.action_space(env_params)
+        # what the policies see: the observation, or it with a one-step memory (memory.py)
+        raw = jax.eval_shape(lambda k: env.reset_env(k, env_params)[0], jax.random.PRNGKey(0))
+        self.memory = make_memory(policy_memory, space, raw)
         self.action_shape = tuple(space.shape)
         self.action_dtype = space.dtype
         self.teleport_families = families([t.teleport for t in tpls])
@@ -151,7 +155,13 @@ class HierarchyRunner:
                         no_pending(obs, self.h.num_actions), pool)
 
     def _fresh_starts(self, key: jax.Array, n: int):
-        return jax.vmap(self.env.reset_env, (0, None))(jax.random.split(key, n), self.env_params)
+        obs, state = jax.vmap(self.env.reset_env, (0, None))(jax.random.split(key, n),
+                                                             self.env_params)
+        return self.policy_obs(obs), state
+
+    def policy_obs(self, raw_obs: jax.Array) -> jax.Array:
+        """What the policies see of fresh episodes' observations (leading axis B)."""
+        return raw_obs if self.memory is None else self.memory.start(raw_obs)
 
     def _new_pool(self, key: jax.Array) -> ResetPool:
         obs, state = self._fresh_starts(key, self.reset_pool)
@@ -202,6 +212,8 @@ class HierarchyRunner:
                                                       k_ctrl, k_tp)
         obs, state, reward, terminated, truncated, info = phases.step(
             self.env, self.env_params, k_step, state_in, action)
+        if self.memory is not None:
+            obs = self.memory.after(carry.obs, obs, action)
         sat, stop = self._stop(state)
         popped = phases.pop(decision.stack, stop, self.k_max, controls.learner)
 

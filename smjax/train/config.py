@@ -8,6 +8,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from smjax.options.memory import POLICY_MEMORIES
+
 METHODS = ("top-down", "bottom-up", "flat")
 ALGOS = ("ppo", "dqn", "actor-critic")
 FROZEN_POLICIES = ("auto", "greedy", "sample")
@@ -79,6 +81,10 @@ class TrainConfig:
         learned yet and a wide first layer is the tick's largest cost), "all" (the whole
         bank in one batched apply: cheaper on a GPU, where launches cost more than FLOPs),
         "auto" (learned on a CPU, all elsewhere). The results are the same either way.
+      policy_memory: what the policies see besides the observation: "none", or
+        "last_action" (the last primitive action and whether it changed the observation,
+        smjax.options.memory): a policy can then tell a blocked move from a new state
+        without sampling its way out (networks and checkpoints are shaped by it).
       finetune: after the levels, fine-tune the learned hierarchy without teleports:
         "on", "off", or "auto" (on for top-down, the method whose levels learn with
         teleports above and below them). Every learned option in turn (top-down, then
@@ -146,6 +152,7 @@ class TrainConfig:
     eval_max_ticks: int = 2000
     reset_pool: int | None = None
     frozen_eval: str = "auto"
+    policy_memory: str = "none"
     finetune: str = "auto"
     finetune_threshold: float = 0.92
     finetune_option_threshold: float = 0.95
@@ -185,6 +192,7 @@ class TrainConfig:
                                          and not isinstance(self.reset_pool, bool)
                                          and self.reset_pool >= 0),
              "reset_pool", "an integer >= 0, or null for num_envs")
+        need(self.policy_memory in POLICY_MEMORIES, "policy_memory", f"one of {POLICY_MEMORIES}")
         need(self.frozen_eval in ("auto", "learned", "all"), "frozen_eval",
              "one of ('auto', 'learned', 'all')")
         need(isinstance(self.threshold, (int, float)) and 0 < self.threshold <= 1, "threshold",

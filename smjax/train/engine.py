@@ -80,9 +80,10 @@ class Engine:
         # learner; scripted leaf controllers run in both), so both share one program.
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                       frozen_policy=mode, allow_teleport=True,
-                                      reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval)
+                                      reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
+                                      policy_memory=cfg.policy_memory)
         obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
-        self.example_obs = obs
+        self.example_obs = self.runner.policy_obs(obs[None])[0]  # what the policies see
         self.num_actions = hierarchy.num_actions
         # every argument has a seed axis: each seed trains its own level (or fine-tunes)
         self.chunk = jax.jit(jax.vmap(self._chunk), donate_argnums=(0,))
