@@ -118,7 +118,7 @@ class TrainConfig:
         traced leaves (PPO: learning_rate, gae_lambda, clip_eps, ent_coef, vf_coef; DQN:
         learning_rate, epsilon_end, epsilon_decay_steps, target_update_period, tau,
         reward_scale; actor-critic: learning_rate, vf_coef, ent_coef), so the phase
-        reuses the levels' compiled chunk.
+        reuses the levels' compiled chunk. In a sweep they override the swept values too.
       finetune_side_cost: while fine-tuning, a template learner is also rewarded by the
         decrease of its template's ``side_cost`` where the environment defines one (Craft:
         items held beyond the one promised), so its run stops leaving behind what the task's
