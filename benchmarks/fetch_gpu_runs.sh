@@ -24,6 +24,9 @@
 # MODE=status HOP=1 also returns each job's latest checkpoint (hop.tgz.part-*); here, in the
 # repo root, `cat /work/.device/N/hop.tgz.part-* | tar xzf -`, then MODE=start JOBS=td4 again
 # with carry [".whl", "runs/gpu/td4"]: it resumes (--resume) where the checkpoint left off.
+# At 128 environments a hop's checkpoint is ~26 MiB, and with the ~34 MiB of wheels and the
+# tree the carry passes the device's 64 MiB limit (the call is refused): move
+# .whl/pyopengl-*.whl aside for the resume call (nothing in smjax, mjx or brax imports it).
 R=runs/gpu
 MODE=${MODE:-status}
 JOBS=${JOBS:-"fl3 td3 fl4 td4"}
