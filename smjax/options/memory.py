@@ -64,7 +64,10 @@ class LastAction:
 
 
 def make_memory(kind: str, action_space, raw_obs) -> LastAction | None:
-    """The policy memory named ``kind`` (None for "none"); ``raw_obs``: one observation."""
+    """The policy memory named ``kind`` (None for "none"); ``raw_obs``: one observation, or
+    a function returning it (called only where a memory needs its shape)."""
     if kind not in POLICY_MEMORIES:
         raise ValueError(f"policy_memory must be one of {POLICY_MEMORIES}, got {kind!r}")
-    return LastAction(action_space, raw_obs) if kind == "last_action" else None
+    if kind == "none":
+        return None
+    return LastAction(action_space, raw_obs() if callable(raw_obs) else raw_obs)

@@ -81,9 +81,10 @@ class HierarchyRunner:
         self.has_teleport = np.array([False] + [t.teleport is not None for t in tpls])
         self.has_controller = np.array([False] + [t.controller is not None for t in tpls])
         space = env.action_space(env_params)
-        # what the policies see: the observation, or it with a one-step memory (memory.py)
-        raw = jax.eval_shape(lambda k: env.reset_env(k, env_params)[0], jax.random.PRNGKey(0))
-        self.memory = make_memory(policy_memory, space, raw)
+        # what the policies see: the observation, or it with a one-step memory (memory.py;
+        # the observation's shape is traced only for a memory, not on every run's start-up)
+        self.memory = make_memory(policy_memory, space, lambda: jax.eval_shape(
+            lambda k: env.reset_env(k, env_params)[0], jax.random.PRNGKey(0)))
         self.action_shape = tuple(space.shape)
         self.action_dtype = space.dtype
         self.teleport_families = families([t.teleport for t in tpls])
