@@ -18,38 +18,47 @@ def lose_machine_after_save(monkeypatch, when) -> None:
     monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
 
 
-def without_levels_bank(out) -> None:
-    """Drop the keep-the-better counters from the checkpoint in ``out`` (its arrays stay):
-    its seeds resume as from format 3 or older, a seed already fine-tuning without its
-    levels' bank."""
+# the keep-the-better counters that checkpoint format 4 added to the host state
+KEEP_BETTER_KEYS = ("check_success", "kept", "baseline")
+
+
+def _stored(out) -> tuple[dict, dict, int]:
+    """The checkpoint in ``out``: its metadata, its leaves by position ("0", "1", ...) and
+    their number."""
     import orbax.checkpoint as ocp
 
     from smjax.train import checkpoint as ckpt
 
     info = ckpt.load_meta(out)
     leaves = ocp.StandardCheckpointer().restore(ckpt.checkpoint_dir(out) / info["path"])
-    arrays = [leaves[str(i)] for i in range(max(int(k) for k in leaves) + 1)]
-    for key in ("check_success", "kept", "baseline"):
+    return info, leaves, max(int(k) for k in leaves) + 1
+
+
+def _rewrite(out, info: dict, arrays: list, fmt: int | None = None) -> None:
+    """Save ``arrays`` with ``info``'s metadata over the checkpoint in ``out``, as format
+    ``fmt`` (None: the format it had), without the keep-the-better counters."""
+    from smjax.train import checkpoint as ckpt
+
+    for key in KEEP_BETTER_KEYS:
         info["meta"]["host"]["finetune"].pop(key)
-    ckpt.save_checkpoint(out, info["step"], arrays, info["meta"])
+    meta = info["meta"] if fmt is None else info["meta"] | {"format": fmt}
+    ckpt.save_checkpoint(out, info["step"], arrays, meta)
+
+
+def without_levels_bank(out) -> None:
+    """Drop the keep-the-better counters from the checkpoint in ``out`` (its arrays stay):
+    its seeds resume as from format 3 or older, a seed already fine-tuning without its
+    levels' bank."""
+    info, leaves, n = _stored(out)
+    _rewrite(out, info, [leaves[str(i)] for i in range(n)])
 
 
 def as_format_3(out, bank_leaves: int) -> None:
     """Rewrite the checkpoint in ``out`` as smjax wrote it before it kept the levels' bank
     for fine-tuning (checkpoint format 3): that bank's ``bank_leaves`` leaves, the last
     ones, dropped."""
-    import orbax.checkpoint as ocp
-
-    from smjax.train import checkpoint as ckpt
-
-    info = ckpt.load_meta(out)
-    leaves = ocp.StandardCheckpointer().restore(ckpt.checkpoint_dir(out) / info["path"])
-    n = max(int(k) for k in leaves) + 1
-    arrays = [leaves[str(i)] for i in range(n - bank_leaves)]
-    host = info["meta"]["host"]
-    for key in ("check_success", "kept", "baseline"):
-        host["finetune"].pop(key)
-    ckpt.save_checkpoint(out, info["step"], arrays, info["meta"] | {"format": 3})
+    info, leaves, n = _stored(out)
+    _rewrite(out, info, [leaves[str(i)] for i in range(n - bank_leaves)], fmt=3)
 
 
 def as_format_2(out, window: int) -> None:
@@ -58,13 +67,10 @@ def as_format_2(out, window: int) -> None:
     each window as the host list of ``[total, count]`` batches that format kept (oldest
     first, trimmed to the most recent batches holding ``window`` episodes)."""
     import numpy as np
-    import orbax.checkpoint as ocp
 
     from smjax.train import checkpoint as ckpt
 
-    info = ckpt.load_meta(out)
-    leaves = ocp.StandardCheckpointer().restore(ckpt.checkpoint_dir(out) / info["path"])
-    n = max(int(k) for k in leaves) + 1
+    info, leaves, n = _stored(out)
     # TrainArrays' last fields: window (total, count, next), task_window (total, count, next)
     windows = [np.asarray(leaves[str(i)]) for i in range(n - 6, n)]
 
