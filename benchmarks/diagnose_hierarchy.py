@@ -29,7 +29,7 @@ import numpy as np
 from smjax.envs.craft import constants as C
 from smjax.options.runner import NO_OPTION, Controls
 from smjax.options.stack import stack_top
-from smjax.train.engine import EVAL_TEMPERATURES
+from smjax.train.engine import EVAL_TEMPERATURES, eval_temperatures
 from smjax.train.policy import load_trained
 
 
@@ -114,7 +114,8 @@ def main(argv=None) -> int:
     engine, bank, learned, seeds = load_trained(args.run_dir)
     program = episodes_program(engine, args.episodes, args.max_ticks)
     keys = jax.random.split(jax.random.key(args.seed), len(seeds))
-    out = program(keys, bank, learned, jnp.asarray(EVAL_TEMPERATURES[args.policy], jnp.float32))
+    out = program(keys, bank, learned, eval_temperatures(args.policy, engine.h.num_options,
+                                                           engine.cfg.option_temperature))
     per_seed = [summarize(*(x[i] for x in out[:4])) for i in range(len(seeds))]
     gains = np.asarray(out[4]).mean(0)  # [O, K], mean over seeds, per episode
     names = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names

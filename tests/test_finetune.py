@@ -81,7 +81,7 @@ def test_results_keep_the_contract(far_teleport_run):
             if a["template"] == "give_key" and (a["running_success"] or 0) < 0.95:
                 assert b["template"] == "open_door"
     assert res["eval_policy"] == "sample"
-    assert set(res["final_success_by_policy"]) == {"greedy", "sample", "sample_t0.5"}
+    assert set(res["final_success_by_policy"]) == {"greedy", "sample", "sample_t0.5", "options_t0.5"}
     assert res["final_success_by_policy"]["sample"] == res["final_success"]
 
 

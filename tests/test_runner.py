@@ -1,5 +1,6 @@
 """The hierarchical tick: teleport vs learned vs scripted dispatch, pops, SMDP discounts,
 learner masks and rewards (with a scripted test double standing in for the learner)."""
+import dataclasses
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -142,6 +143,27 @@ def test_learner_acting_frozen_takes_its_greedy_masked_choice():
     _, tr, _ = runner.tick(carry, jax.random.PRNGKey(1), own, bank, controls)
     assert np.asarray(tr.decision).all()
     np.testing.assert_array_equal(np.asarray(tr.action), np.where(holding, 2, 3))
+
+
+def test_per_option_temperature_samples_the_root_and_picks_greedily_below_it():
+    # Controls.temperature [O]: each frozen option picks at its own temperature (the root
+    # sampling at 1 while the template below it picks at 0); the learner at its own entry
+    env = KeyDoor()
+    h = env.hierarchies()["paper"]
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions), gamma=GAMMA,
+                             frozen_policy="sample")
+    flat = jnp.zeros((2, 512, h.num_actions)).at[:, :, 2].set(0.5)  # nearly uniform scores
+    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, True]),
+                        temperature=jnp.asarray([1.0, 0.0]))
+    picks = np.asarray(runner._frozen_pick(flat, jax.random.PRNGKey(3), controls))
+    assert (picks[1] == 2).all()                        # the template: argmax, every time
+    assert len(set(picks[0].tolist())) == h.num_actions  # the root: a sample
+    learner = np.asarray(runner._frozen_pick(flat[0], jax.random.PRNGKey(4), controls,
+                                             controls.learner))
+    assert (learner == 2).all()                          # the learner is option 1: greedy
+    root = dataclasses.replace(controls, learner=jnp.asarray(0))
+    learner = np.asarray(runner._frozen_pick(flat[0], jax.random.PRNGKey(4), root, root.learner))
+    assert len(set(learner.tolist())) == h.num_actions
 
 
 def test_frozen_policy_mode_is_validated():

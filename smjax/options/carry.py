@@ -102,7 +102,8 @@ class Controls:
     continue_episodes: bool, the environment goes on when the learner's option ends (None:
       as the runner was built); its next episode starts where the levels above call it again.
     temperature: float, how frozen policies pick: 0 greedy (argmax), else a sample at this
-      temperature (None: as the runner was built).
+      temperature; or float [O], one per option (e.g. the root sampling at 1 while the
+      templates below it pick at 0.5); None: as the runner was built.
     side_cost: float weight (or bool), a template learner is also rewarded by this times the
       decrease of its template's ``side_cost`` (None or 0: never; fine-tuning turns it on).
     gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs

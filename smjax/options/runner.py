@@ -47,6 +47,7 @@ class HierarchyRunner:
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, gamma: float,
                  frozen_policy: str = "greedy", allow_teleport: bool = True,
                  reset_on_learner_end: bool = True, frozen_temperature: float = 1.0,
+                 template_temperature: float | None = None,
                  learner_acts_frozen: bool = False, reset_pool: int = 0,
                  frozen_eval: str = "auto", policy_memory: str = "none"):
         if frozen_policy not in ("greedy", "sample"):
@@ -58,6 +59,11 @@ class HierarchyRunner:
         if not frozen_temperature > 0:
             raise ValueError(f"frozen_temperature must be > 0, got {frozen_temperature}")
         self.frozen_temperature = float(frozen_temperature)
+        # the templates' own (the root keeps ``frozen_temperature``); None: the same
+        if template_temperature is not None and not template_temperature > 0:
+            raise ValueError(f"template_temperature must be > 0, got {template_temperature}")
+        self.template_temperature = (None if template_temperature is None
+                                     else float(template_temperature))
         self.allow_teleport = bool(allow_teleport)
         self.reset_on_learner_end = bool(reset_on_learner_end)
         # The learner picks as the bank will run it once frozen (greedy or sampled, per
@@ -363,7 +369,8 @@ class HierarchyRunner:
             shape = jax.eval_shape(own)
             logits = jax.lax.cond(controls.learner >= 0, own,
                                   lambda: jnp.zeros(shape.shape, shape.dtype))
-        action = self._frozen_pick(jnp.where(mask, logits, -1e9), key, controls).astype(jnp.int32)
+        action = self._frozen_pick(jnp.where(mask, logits, -1e9), key, controls,
+                                    controls.learner).astype(jnp.int32)
         zeros = jnp.zeros(action.shape, jnp.float32)
         return ActOutput(action, zeros, zeros)
 
@@ -396,10 +403,16 @@ class HierarchyRunner:
         return jax.lax.fori_loop(0, need.sum(), one, out)
 
     def frozen_temperature_of(self, controls: Controls) -> jax.Array | float:
-        """The temperature frozen policies pick at (0: greedy)."""
+        """The temperature frozen policies pick at (0: greedy): one for every option, or
+        one per option ([O], ``Controls.temperature``)."""
         if controls.temperature is not None:
             return controls.temperature
-        return 0.0 if self.frozen_policy == "greedy" else self.frozen_temperature
+        if self.frozen_policy == "greedy":
+            return 0.0
+        if self.template_temperature in (None, self.frozen_temperature):
+            return self.frozen_temperature
+        return np.asarray([self.frozen_temperature]  # the root is option 0
+                          + [self.template_temperature] * (self.h.num_options - 1), np.float32)
 
     def acts_frozen(self, controls: Controls) -> bool:
         """Whether the learner picks as it will once frozen (``Controls.acts_frozen``, else
@@ -412,15 +425,22 @@ class HierarchyRunner:
             return self.reset_on_learner_end
         return ~controls.continue_episodes
 
-    def _frozen_pick(self, logits: jax.Array, key: jax.Array, controls: Controls) -> jax.Array:
+    def _frozen_pick(self, logits: jax.Array, key: jax.Array, controls: Controls,
+                     option: jax.Array | None = None) -> jax.Array:
         """A frozen policy's choice from masked scores (last axis): argmax at temperature 0,
-        else a sample at the temperature."""
+        else a sample at the temperature. ``logits`` are every option's [O, B, A], or, with
+        ``option``, that one option's [B, A] (a per-option temperature then picks its own)."""
         temperature = self.frozen_temperature_of(controls)
         if isinstance(temperature, float):  # known when tracing: compute only that pick
             if temperature == 0.0:
                 return jnp.argmax(logits, -1)
             return jax.random.categorical(key, logits / temperature, -1)
-        sample = jax.random.categorical(key, logits / jnp.maximum(temperature, 1e-6), -1)
+        temperature = jnp.asarray(temperature, jnp.float32)
+        if temperature.ndim == 1:  # one per option
+            temperature = (temperature[jnp.maximum(option, 0)] if option is not None
+                           else temperature.reshape((-1,) + (1,) * (logits.ndim - 2)))
+        sample = jax.random.categorical(
+            key, logits / jnp.maximum(temperature, 1e-6)[..., None], -1)
         return jnp.where(temperature > 0, sample, jnp.argmax(logits, -1))
 
     def _run_family(self, fams, key, state, chosen, action, *, controls: bool):

@@ -52,6 +52,10 @@ class TrainConfig:
         and wins over a swept gamma.
       gamma: discount per primitive tick (gamma**d for a teleported call of duration d).
       frozen_policy: how trained options act when frozen (auto: greedy for dqn, else sample).
+      option_temperature: where frozen policies sample, the temperature every template
+        below the root samples at (the root samples at 1), in the levels, gates,
+        fine-tuning and the final evaluation; below 1 a template takes its likelier
+        actions more often (fewer stray ones) while the root keeps its randomness.
       continue_episodes: top-down/bottom-up only: do not reset the environment when the
         option being trained ends; its next episode starts wherever the frozen levels above
         call it again, i.e. on the states the full task gives it (football's ``attack`` is
@@ -143,6 +147,7 @@ class TrainConfig:
     max_steps_per_level: int = 0
     gamma: float = 0.99
     frozen_policy: str = "auto"
+    option_temperature: float = 1.0
     continue_episodes: bool = False
     gate: bool = True
     gate_envs: int = 256
@@ -204,6 +209,9 @@ class TrainConfig:
                  and 0 < value <= 1, name, "in (0, 1]")
         need(isinstance(self.gamma, (int, float)) and 0 < self.gamma <= 1, "gamma", "in (0, 1]")
         need(self.frozen_policy in FROZEN_POLICIES, "frozen_policy", f"one of {FROZEN_POLICIES}")
+        need(isinstance(self.option_temperature, (int, float))
+             and not isinstance(self.option_temperature, bool)
+             and 0 < self.option_temperature <= 10, "option_temperature", "in (0, 10]")
         need(isinstance(self.checkpoint_every, (int, float)) and self.checkpoint_every >= 0,
              "checkpoint_every", ">= 0 seconds")
         need(isinstance(self.tensorboard, bool), "tensorboard", "true or false")

@@ -60,9 +60,23 @@ def frozen_mode(cfg: TrainConfig, agent) -> str:
     return agent.frozen_policy if cfg.frozen_policy == "auto" else cfg.frozen_policy
 
 
-# the frozen-policy modes final_success is measured under (temperature; 0 = argmax):
-# results.json reports every one (final_success_by_policy)
-EVAL_TEMPERATURES = {"greedy": 0.0, "sample": 1.0, "sample_t0.5": 0.5}
+# the frozen-policy modes final_success is measured under (temperature; 0 = argmax; a
+# pair: the root's, then every template's): results.json reports every one
+# (final_success_by_policy)
+EVAL_TEMPERATURES = {"greedy": 0.0, "sample": 1.0, "sample_t0.5": 0.5,
+                     "options_t0.5": (1.0, 0.5)}
+
+
+def eval_temperatures(policy: str, num_options: int, option_temperature: float = 1.0) -> jax.Array:
+    """float32 [O]: each option's temperature under an evaluation mode (0 is the root);
+    "sample" samples the templates at ``option_temperature`` (TrainConfig's)."""
+    if policy not in EVAL_TEMPERATURES:
+        raise ValueError(f"policy must be one of {tuple(EVAL_TEMPERATURES)}, got {policy!r}")
+    t = EVAL_TEMPERATURES[policy]
+    root, templates = t if isinstance(t, tuple) else (t, t)
+    if policy == "sample":
+        templates = option_temperature
+    return jnp.full((num_options,), templates, jnp.float32).at[0].set(root)
 
 
 class Engine:
@@ -81,7 +95,8 @@ class Engine:
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
                                       frozen_policy=mode, allow_teleport=True,
                                       reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
-                                      policy_memory=cfg.policy_memory)
+                                      policy_memory=cfg.policy_memory,
+                                      template_temperature=cfg.option_temperature)
         obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
         self.example_obs = self.runner.policy_obs(obs[None])[0]  # what the policies see
         self.num_actions = hierarchy.num_actions
@@ -206,7 +221,7 @@ class Engine:
         ``fail_below``, the answer is certain and the episodes stop (``on``): the same
         decision, fewer ticks. The success then reported is the mean so far (unfinished
         episodes count 0), which lies on the same side of the threshold.
-        ``temperature``: how frozen policies (and the learner) pick, 0 = greedy."""
+        ``temperature``: float [O], how each frozen policy (and the learner) picks, 0 = greedy."""
         runner = self.runner
         controls = Controls(learner, start, learned, teleport, continue_episodes=jnp.asarray(False),
                             temperature=temperature, acts_frozen=True)
@@ -275,13 +290,12 @@ class Engine:
         evaluation); where given, only its params are passed (they are never run)."""
         S = keys.shape[0]
         policy = self.frozen_policy if policy is None else policy
-        if policy not in EVAL_TEMPERATURES:
-            raise ValueError(f"policy must be one of {tuple(EVAL_TEMPERATURES)}, got {policy!r}")
+        temperatures = eval_temperatures(policy, self.h.num_options, self.cfg.option_temperature)
         due = [True] * S if due is None else due
         bounded = threshold is not None and self.success_bounded
         per_seed = place((jnp.full((S,), NO_OPTION, jnp.int32), jnp.zeros((S,), jnp.int32),
                           ~jnp.asarray(due, bool), _decide([threshold if bounded else None] * S)))
-        flags = place((jnp.asarray(False), jnp.asarray(EVAL_TEMPERATURES[policy], jnp.float32),
+        flags = place((jnp.asarray(False), temperatures,
                        jnp.asarray(self.cfg.eval_max_ticks)))
         learner, start, skip, decide = per_seed
         # the program (shared with the gate) takes learner params; with none, option 0's
@@ -301,8 +315,9 @@ class Engine:
         decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
         per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
                           ~jnp.asarray(due, bool), decide))
-        temperature = EVAL_TEMPERATURES[self.frozen_policy]
-        flags = place((jnp.asarray(True), jnp.asarray(temperature, jnp.float32),
+        temperatures = eval_temperatures(self.frozen_policy, self.h.num_options,
+                                         self.cfg.option_temperature)
+        flags = place((jnp.asarray(True), temperatures,
                        jnp.asarray(self.cfg.gate_max_ticks)))
         learner, start, skip, decide = per_seed
         args = (keys, state.learner.params, bank, learned, learner, start) + flags + (skip, decide)
