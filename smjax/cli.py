@@ -81,7 +81,7 @@ def _add_train(sub):
                         "its task success passes --set finetune_threshold (0.92) (default auto: on "
                         "for top-down; docs/guide.md, 'Fine-tuning')")
     p.add_argument("--finetune-episodes", type=int, default=None, metavar="N",
-                   help="fine-tuning's episode budget per seed (default 16000)")
+                   help="fine-tuning's episode budget per seed (default 20000)")
     p.add_argument("--fixed-map", action="store_true", help="Craft: one fixed map per run (the paper's setting)")
     p.add_argument("--tensorboard", action="store_true", help="also write TensorBoard event files to OUT/tensorboard")
     p.add_argument("--overwrite", action="store_true",

@@ -51,10 +51,10 @@ class PPOConfig:
     ent_coef: float = 0.01
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
-    # 8, not PureJaxRL's 4: on Craft (10 seeds, H100) the levels took 7-32% fewer episodes
-    # and fine-tuning climbed ~4,000 episodes faster at the same final success; the
-    # 2-core CPU quick start trains 1.14x longer for 8% fewer episodes (RESULTS 14-15)
-    update_epochs: int = 8
+    # 4: at 8 the hierarchy's levels take 7-32% fewer episodes on Craft, but flat PPO on
+    # get_gold collapses (6 of 10 seeds end at 0.0, against 0.79 at 4), and the 2-core CPU
+    # quick start trains 1.14x longer (benchmarks/RESULTS.md section 15)
+    update_epochs: int = 4
     num_minibatches: int = 4
     hidden_sizes: tuple[int, ...] = (64, 64)
     activation: str = "tanh"

@@ -114,10 +114,11 @@ class TrainConfig:
         about one chunk; short turns let every option improve a little in each round, and
         reached in 6,000-8,000 episodes what turns of 2,000 reached in 20,000:
         benchmarks/RESULTS.md section 13).
-      finetune_max_episodes: the phase's budget in environment episodes, per seed
-        (16,000: with PPO's 8 epochs get_gold reaches 0.906 in ~20,000 episodes in all,
-        levels included; get_gem's and get_gold's task success hardly moves after
-        ~15,000, and at 15,000 they end 0.01-0.02 lower: RESULTS section 15).
+      finetune_max_episodes: the phase's budget in environment episodes, per seed (at
+        12,000, get_gem's and get_gold's totals with the levels stay under 21,000 and
+        19,000 episodes, and their final success is 0.03-0.04 lower: RESULTS section 13;
+        with PPO's ``update_epochs=8`` the curves flatten by ~15,000, and 16,000 brings
+        get_gold to 0.89-0.91 in ~20,000 episodes in all: section 15).
       finetune_agent: learner hyper-parameters that fine-tuning turns use instead of
         ``agent``'s (e.g. ``{"learning_rate": 1e-3}``); only those the learner keeps as
         traced leaves (PPO: learning_rate, gae_lambda, clip_eps, ent_coef, vf_coef; DQN:
@@ -164,7 +165,7 @@ class TrainConfig:
     finetune_option_threshold: float = 0.95
     finetune_turn_episodes: int = 250
     finetune_max_rest: int = 0
-    finetune_max_episodes: int = 16_000
+    finetune_max_episodes: int = 20_000
     finetune_agent: dict = field(default_factory=dict)
     finetune_side_cost: bool = True
     finetune_side_cost_weight: float = 1.0

@@ -104,7 +104,7 @@ class Engine:
         self.chunk = jax.jit(jax.vmap(self._chunk), donate_argnums=(0,))
         self.episodes = jax.jit(
             jax.vmap(self._first_episodes,
-                     in_axes=(0, 0, 0, 0, 0, 0, None, None, None, 0, 0, None)),
+                     in_axes=(0, 0, 0, 0, 0, 0, None, 0, None, 0, 0, None)),
             static_argnums=(11,))
         self._compiled_episodes: dict[tuple, Any] = {}
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
@@ -221,7 +221,8 @@ class Engine:
         ``fail_below``, the answer is certain and the episodes stop (``on``): the same
         decision, fewer ticks. The success then reported is the mean so far (unfinished
         episodes count 0), which lies on the same side of the threshold.
-        ``temperature``: float [O], how each frozen policy (and the learner) picks, 0 = greedy."""
+        ``temperature``: float [O] (per seed), how each frozen policy (and the learner)
+        picks, 0 = greedy."""
         runner = self.runner
         controls = Controls(learner, start, learned, teleport, continue_episodes=jnp.asarray(False),
                             temperature=temperature, acts_frozen=True)
@@ -294,14 +295,15 @@ class Engine:
         due = [True] * S if due is None else due
         bounded = threshold is not None and self.success_bounded
         per_seed = place((jnp.full((S,), NO_OPTION, jnp.int32), jnp.zeros((S,), jnp.int32),
-                          ~jnp.asarray(due, bool), _decide([threshold if bounded else None] * S)))
-        flags = place((jnp.asarray(False), temperatures,
-                       jnp.asarray(self.cfg.eval_max_ticks)))
-        learner, start, skip, decide = per_seed
+                          ~jnp.asarray(due, bool), _decide([threshold if bounded else None] * S),
+                          jnp.broadcast_to(temperatures, (S,) + temperatures.shape)))
+        teleport, max_ticks = place((jnp.asarray(False), jnp.asarray(self.cfg.eval_max_ticks)))
+        learner, start, skip, decide, temperatures = per_seed
         # the program (shared with the gate) takes learner params; with none, option 0's
         # bank entry has their shapes (the bank is built from the learners' params)
         params = self._bank_entry0(bank) if learner_state is None else learner_state.params
-        args = (keys, params, bank, learned, learner, start) + flags + (skip, decide)
+        args = (keys, params, bank, learned, learner, start, teleport, temperatures, max_ticks,
+                skip, decide)
         return self._run_episodes(args, self.cfg.eval_envs)
 
     def gate(self, keys, state: SeedState, bank, learned, learners: list[int],
@@ -313,12 +315,13 @@ class Engine:
         # a template's success is its F_o (0 or 1); the root's is the task's
         bounded = [o != 0 or self.success_bounded for o in learners]
         decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
-        per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
-                          ~jnp.asarray(due, bool), decide))
         temperatures = eval_temperatures(self.frozen_policy, self.h.num_options,
                                          self.cfg.option_temperature)
-        flags = place((jnp.asarray(True), temperatures,
-                       jnp.asarray(self.cfg.gate_max_ticks)))
-        learner, start, skip, decide = per_seed
-        args = (keys, state.learner.params, bank, learned, learner, start) + flags + (skip, decide)
+        per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
+                          ~jnp.asarray(due, bool), decide,
+                          jnp.broadcast_to(temperatures, (len(learners),) + temperatures.shape)))
+        teleport, max_ticks = place((jnp.asarray(True), jnp.asarray(self.cfg.gate_max_ticks)))
+        learner, start, skip, decide, temperatures = per_seed
+        args = (keys, state.learner.params, bank, learned, learner, start, teleport, temperatures,
+                max_ticks, skip, decide)
         return self._run_episodes(args, self.cfg.gate_envs)
