@@ -33,6 +33,23 @@ def test_sources_override_in_order(tmp_path):
         resolve_config(agent={"gamma": 0.5})
 
 
+def test_the_shipped_config_files_load_and_build_their_learner(tmp_path):
+    # every preset under configs/ is a valid TrainConfig whose agent settings PPO accepts,
+    # and a flag still wins over the file
+    from pathlib import Path
+
+    from smjax.agents import make_agent
+
+    files = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
+    assert files
+    for file in files:
+        cfg = resolve_config(file=file)
+        make_agent(cfg.algo, **cfg.agent)
+    fast = resolve_config(file=files[0].with_name("craft_fast.yaml"),
+                          sets={"finetune_max_episodes": 12000})
+    assert fast.agent == {"update_epochs": 8} and fast.finetune_max_episodes == 12000
+
+
 def test_settings_that_do_not_change_results_are_not_the_run_identity():
     identity = run_identity("craft/get_wood", TrainConfig(tensorboard=True), [0], {})
     assert not set(RUN_SETTINGS) & set(identity)
