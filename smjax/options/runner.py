@@ -41,6 +41,11 @@ FROZEN_EVALS = ("auto", "learned", "all")
 _NEVER = np.iinfo(np.int32).max // 2
 
 
+def option_temperatures(root: float, templates: float, num_options: int) -> np.ndarray:
+    """float32 [O]: the root's (option 0) temperature, then every template's."""
+    return np.asarray([root] + [templates] * (num_options - 1), np.float32)
+
+
 class HierarchyRunner:
     """Compiles a hierarchy over an environment into batched tick/reset functions."""
 
@@ -411,8 +416,8 @@ class HierarchyRunner:
             return 0.0
         if self.template_temperature in (None, self.frozen_temperature):
             return self.frozen_temperature
-        return np.asarray([self.frozen_temperature]  # the root is option 0
-                          + [self.template_temperature] * (self.h.num_options - 1), np.float32)
+        return option_temperatures(self.frozen_temperature, self.template_temperature,
+                                   self.h.num_options)
 
     def acts_frozen(self, controls: Controls) -> bool:
         """Whether the learner picks as it will once frozen (``Controls.acts_frozen``, else

@@ -17,7 +17,8 @@ import numpy as np
 from smjax.agents.smdp import carry_pending
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
-from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
+from smjax.options.runner import (NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats,
+                                  option_temperatures)
 from smjax.train.config import TrainConfig
 
 
@@ -76,7 +77,7 @@ def eval_temperatures(policy: str, num_options: int, option_temperature: float =
     root, templates = t if isinstance(t, tuple) else (t, t)
     if policy == "sample":
         templates = option_temperature
-    return jnp.full((num_options,), templates, jnp.float32).at[0].set(root)
+    return jnp.asarray(option_temperatures(root, templates, num_options))
 
 
 class Engine:
@@ -278,6 +279,12 @@ class Engine:
             compile_s = time.perf_counter() - t0
         return self._compiled_episodes[sig](*args), compile_s
 
+    def _seed_temperatures(self, policy: str, num_seeds: int) -> jax.Array:
+        """float32 [S, O]: each option's temperature under ``policy``, for every seed (a
+        per-seed input, so a mesh splits it along its seed axis like the others)."""
+        t = eval_temperatures(policy, self.h.num_options, self.cfg.option_temperature)
+        return jnp.broadcast_to(t, (num_seeds,) + t.shape)
+
     def evaluate(self, keys, bank, learned, learner_state=None, place=_same, *,
                  policy: str | None = None, due: list[bool] | None = None,
                  threshold: float | None = None) -> tuple[dict, float]:
@@ -291,12 +298,11 @@ class Engine:
         evaluation); where given, only its params are passed (they are never run)."""
         S = keys.shape[0]
         policy = self.frozen_policy if policy is None else policy
-        temperatures = eval_temperatures(policy, self.h.num_options, self.cfg.option_temperature)
         due = [True] * S if due is None else due
         bounded = threshold is not None and self.success_bounded
         per_seed = place((jnp.full((S,), NO_OPTION, jnp.int32), jnp.zeros((S,), jnp.int32),
                           ~jnp.asarray(due, bool), _decide([threshold if bounded else None] * S),
-                          jnp.broadcast_to(temperatures, (S,) + temperatures.shape)))
+                          self._seed_temperatures(policy, S)))
         teleport, max_ticks = place((jnp.asarray(False), jnp.asarray(self.cfg.eval_max_ticks)))
         learner, start, skip, decide, temperatures = per_seed
         # the program (shared with the gate) takes learner params; with none, option 0's
@@ -315,11 +321,9 @@ class Engine:
         # a template's success is its F_o (0 or 1); the root's is the task's
         bounded = [o != 0 or self.success_bounded for o in learners]
         decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
-        temperatures = eval_temperatures(self.frozen_policy, self.h.num_options,
-                                         self.cfg.option_temperature)
         per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
                           ~jnp.asarray(due, bool), decide,
-                          jnp.broadcast_to(temperatures, (len(learners),) + temperatures.shape)))
+                          self._seed_temperatures(self.frozen_policy, len(learners))))
         teleport, max_ticks = place((jnp.asarray(True), jnp.asarray(self.cfg.gate_max_ticks)))
         learner, start, skip, decide, temperatures = per_seed
         args = (keys, state.learner.params, bank, learned, learner, start, teleport, temperatures,
