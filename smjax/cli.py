@@ -64,7 +64,7 @@ def _add_train(sub):
                         "trains for every seed in the same one compiled program; writes "
                         "OUT/sweep.json and OUT/point-<k>/results.json (a point's results are "
                         "those of its run alone). Sweepable: gamma; agent.learning_rate (every "
-                        "algo); ppo: agent.gae_lambda, clip_eps, ent_coef, vf_coef; "
+                        "algo); ppo: agent.gae_lambda, clip_eps, ent_coef, vf_coef, target_kl; "
                         "actor-critic: agent.ent_coef, vf_coef")
     p.add_argument("--hierarchy", default=None, help="hierarchy name (see `smjax list --hierarchies`)")
     p.add_argument("--num-envs", type=int, default=None, help="parallel environments per seed")

@@ -131,3 +131,35 @@ def test_minibatches_partition_ticks_and_share_decisions_evenly():
     per_minibatch = np.asarray(decision)[np.asarray(idx)].__and__(np.asarray(real)).sum(1)
     assert per_minibatch.sum() == int(decision.sum())
     assert per_minibatch.max() - per_minibatch.min() <= 1
+
+
+def test_ppo_target_kl_stops_the_update_once_the_policy_drifts():
+    """The first minibatch always steps (its parameters are the ones that gathered the data,
+    KL 0); past 1.5 x target_kl every later minibatch and epoch leaves the parameters alone;
+    target_kl 0 never stops."""
+    from smjax.agents.networks import masked_log_softmax, take_action
+
+    traj = random_traj(8, num_ticks=16, num_envs=4)
+    key = jax.random.PRNGKey(0)
+    free = make_agent("ppo", update_epochs=3, num_minibatches=2)
+    state = _init(free)
+    # the log-probabilities of the policy that gathered the data: the learner's own
+    logits = free.policy_logits(state.params, jnp.asarray(traj.obs).reshape(-1, OBS_DIM))
+    log_prob = take_action(masked_log_softmax(logits, traj.action_mask.reshape(-1, NUM_ACTIONS)),
+                           jnp.asarray(traj.action).reshape(-1))
+    traj = traj._replace(log_prob=np.asarray(log_prob).reshape(traj.reward.shape))
+    s_free, m_free = jax.jit(free.update)(state, traj, key)
+    assert int(s_free.grad_steps) == 6 and float(m_free["kl_stopped"]) == 0.0
+    tight = make_agent("ppo", update_epochs=3, num_minibatches=2, target_kl=1e-12)
+    s_tight, m_tight = jax.jit(tight.update)(_init(tight), traj, key)  # same params
+    assert int(s_tight.grad_steps) == 1 and float(m_tight["kl_stopped"]) == 1.0
+    assert not np.allclose(jax.tree.leaves(s_tight.params)[0], jax.tree.leaves(state.params)[0])
+    loose = make_agent("ppo", update_epochs=3, num_minibatches=2, target_kl=1e3)
+    s_loose, m_loose = jax.jit(loose.update)(_init(loose), traj, key)
+    assert float(m_loose["kl_stopped"]) == 0.0
+    chex.assert_trees_all_close(s_loose.params, s_free.params, rtol=1e-6, atol=1e-7)
+
+
+def test_ppo_target_kl_must_not_be_negative():
+    with pytest.raises(ValueError, match="target_kl"):
+        make_agent("ppo", target_kl=-0.01)

@@ -74,6 +74,13 @@ def test_results_contract(top_down_run):
     assert (out / "curves.png").stat().st_size > 5000
     events = list((out / "tensorboard").glob("events.out.tfevents.*"))  # written on request
     assert events and events[0].stat().st_size > 100
+    # the learner's own metrics, per seed and level, and per option while fine-tuning
+    written = b"".join(e.read_bytes() for e in events)
+    for tag in (b"seed_0/level_1_open_door/learner/entropy", b"seed_1/level_2_give_key/learner/approx_kl",
+                b"/learner/kl_stopped", b"seed_0/level_1_open_door/running_success"):
+        assert tag in written, tag
+    if res["finetune"] is not None:
+        assert b"seed_0/finetune/" in written and b"/learner/value_loss" in written
     # episodes to threshold are the per-level episodes summed, as the paper counts
     for s in range(2):
         assert on_disk["episodes_to_threshold"][s] == sum(l["episodes"][s] for l in on_disk["levels"])

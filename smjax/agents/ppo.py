@@ -56,6 +56,11 @@ class PPOConfig:
     # quick start trains 1.14x longer (benchmarks/RESULTS.md section 15)
     update_epochs: int = 4
     num_minibatches: int = 4
+    # Early stop on the policy's drift (0: never): once a minibatch's approximate
+    # KL(old || new) exceeds 1.5 x target_kl, the rest of the update's minibatches and
+    # epochs leave the parameters alone (the Stable-Baselines3 rule). It bounds how far
+    # many epochs can push the policy from the one that gathered the data.
+    target_kl: float = 0.0
     hidden_sizes: tuple[int, ...] = (64, 64)
     activation: str = "tanh"
     shared_torso: bool = False
@@ -73,6 +78,7 @@ class PPOConfig:
         checks.check_range(self, "max_grad_norm", 0.0, low_open=True)
         checks.check_positive_int(self, "update_epochs")
         checks.check_positive_int(self, "num_minibatches")
+        checks.check_range(self, "target_kl", 0.0)
         checks.check_hidden_sizes(self)
         checks.check_choice(self, "activation", ("tanh", "relu", "gelu", "elu", "swish"))
         checks.check_range(self, "adam_eps", 0.0, low_open=True)
@@ -92,7 +98,7 @@ class PolicyGradientState:
 
 
 # the config fields PPO reads from ``state.hp`` (traced: one compile serves a sweep)
-SWEEPABLE = ("learning_rate", "gae_lambda", "clip_eps", "ent_coef", "vf_coef")
+SWEEPABLE = ("learning_rate", "gae_lambda", "clip_eps", "ent_coef", "vf_coef", "target_kl")
 
 
 def make_network(num_actions: int, hidden_sizes, activation: str, shared_torso: bool):
@@ -229,7 +235,7 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         )
 
         def minibatch_step(carry, mb):
-            params, opt_state, grad_steps = carry
+            params, opt_state, grad_steps, stopped = carry
             idx, real = mb
             batch = jax.tree.map(lambda x: x[idx], data)
             batch = batch[:-1] + (jnp.logical_and(batch[-1], real),)
@@ -238,17 +244,23 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
             updates = scale_by_lr(updates, state.hp["learning_rate"])
             new_params = optax.apply_updates(params, updates)
             has_decision = jnp.any(batch[-1])
-            params, opt_state = apply_if(has_decision, (new_params, new_opt_state), (params, opt_state))
+            # the KL is that of the parameters before this step: past the limit, this
+            # minibatch and every later one leave them alone
+            target_kl = state.hp["target_kl"]
+            stopped = stopped | (has_decision & (target_kl > 0)
+                                 & (aux["approx_kl"] > 1.5 * target_kl))
+            step = has_decision & ~stopped
+            params, opt_state = apply_if(step, (new_params, new_opt_state), (params, opt_state))
             aux = dict(aux, total_loss=total, counted=has_decision.astype(jnp.float32))
-            return (params, opt_state, grad_steps + has_decision.astype(jnp.int32)), aux
+            return (params, opt_state, grad_steps + step.astype(jnp.int32), stopped), aux
 
         def epoch_step(carry, epoch_key):
             idx, real = minibatch_indices(epoch_key, data[-1], config.num_minibatches)
             return jax.lax.scan(minibatch_step, carry, (idx, real))
 
-        carry = (state.params, state.opt_state, state.grad_steps)
+        carry = (state.params, state.opt_state, state.grad_steps, jnp.zeros((), bool))
         epoch_keys = jax.random.split(key, config.update_epochs)
-        (params, opt_state, grad_steps), aux = jax.lax.scan(epoch_step, carry, epoch_keys)
+        (params, opt_state, grad_steps, stopped), aux = jax.lax.scan(epoch_step, carry, epoch_keys)
         counted = aux.pop("counted")
         metrics = {name: masked_mean(value, counted) for name, value in aux.items()}
         num_decisions = decision.sum().astype(jnp.int32)
@@ -267,6 +279,7 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
             mean_return=masked_mean(ret, decision),
             episodes_seen=new_state.episodes_seen,
             grad_steps=grad_steps,
+            kl_stopped=stopped.astype(jnp.float32),
         )
         return new_state, metrics
 

@@ -121,7 +121,7 @@ class TrainConfig:
         get_gold to 0.89-0.91 in ~20,000 episodes in all: section 15).
       finetune_agent: learner hyper-parameters that fine-tuning turns use instead of
         ``agent``'s (e.g. ``{"learning_rate": 1e-3}``); only those the learner keeps as
-        traced leaves (PPO: learning_rate, gae_lambda, clip_eps, ent_coef, vf_coef; DQN:
+        traced leaves (PPO: learning_rate, gae_lambda, clip_eps, ent_coef, vf_coef, target_kl; DQN:
         learning_rate, epsilon_end, epsilon_decay_steps, target_update_period, tau,
         reward_scale; actor-critic: learning_rate, vf_coef, ent_coef), so the phase
         reuses the levels' compiled chunk. In a sweep they override the swept values too.

@@ -143,9 +143,11 @@ class HierarchyTrainer(ft.FinetunePhase):
         bar = Progress(self) if self.progress else None
         while self._training():
             t0 = time.perf_counter()
-            stats, windows = self._chunk()
+            stats, windows, metrics = self._chunk()
             dt = time.perf_counter() - t0
+            training = self._training()  # before _account's counts: whose chunk this was
             candidates, task_candidates = self._account(stats, windows)
+            self._log_learner(metrics, training)
             st.chunks += 1
             passed = self._accept(candidates)
             task_passed = self._accept_task(task_candidates)
@@ -205,7 +207,8 @@ class HierarchyTrainer(ft.FinetunePhase):
         return jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
 
     def _chunk(self):
-        """One compiled chunk for every seed at its own level; its stats and windows [S, U]."""
+        """One compiled chunk for every seed at its own level; its stats and windows [S, U],
+        and the learner's update metrics [S, U] (None unless TensorBoard is written)."""
         S, a = len(self.seeds), self.arrays
         active = self._per_seed([i < self.num_stages for i in self.state.stage], bool)
         learner = self._place_small(self._options())
@@ -227,15 +230,33 @@ class HierarchyTrainer(ft.FinetunePhase):
             t0 = time.perf_counter()
             self._compiled = self.engine.chunk.lower(*args).compile()
             self.state.compile_seconds += time.perf_counter() - t0
-        state, stats, _, (window, task_window), windows = self._compiled(*args)
+        state, stats, metrics, (window, task_window), windows = self._compiled(*args)
         stats, windows = dist.gather((stats, windows))  # [S, U, ...], the same on every process
+        metrics = dist.gather(metrics) if self._tb is not None else None
         if not all_finite(state.learner.params):
             where = ", ".join(f"seed {self.seeds[s]} level {self._plan(s).level} "
                               f"({self._plan(s).name})" for s in self._training())
             raise NonFiniteError(f"non-finite learner parameters in chunk {self.state.chunks} "
                                  f"(training: {where})")
         self.arrays = a.replace(state=state, window=window, task_window=task_window)
-        return stats, windows
+        return stats, windows, metrics
+
+    def _log_learner(self, metrics, seeds: list[int]) -> None:
+        """TensorBoard: each training seed's learner metrics of the chunk (the mean over its
+        updates: PPO's entropy, approx_kl, losses, ...), at the level's or the phase's env
+        steps, under ``seed_S/level_L_NAME/learner/`` or ``seed_S/finetune/NAME/learner/``."""
+        if self._tb is None or metrics is None:
+            return
+        means = {name: np.asarray(value, np.float64) for name, value in metrics.items()}
+        for s in seeds:
+            plan, seed = self._plan(s), self.seeds[s]
+            if self._finetuning(s):
+                tag, steps = f"seed_{seed}/finetune/{plan.name}", self.state.finetune[s].env_steps
+            else:
+                tag, steps = f"seed_{seed}/level_{plan.level}_{plan.name}", self.state.level[s].env_steps
+            for name, value in means.items():
+                if value.ndim == 2:  # [S, U]: one scalar per update
+                    self._tb.add_scalar(f"{tag}/learner/{name}", float(np.mean(value[s])), steps)
 
     def _evaluate(self, t_start: float) -> dict:
         a, st = self.arrays, self.state
