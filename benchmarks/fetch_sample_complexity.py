@@ -108,6 +108,7 @@ def main() -> None:
     ap.add_argument("--blocks", type=int, nargs="+", default=[3, 4])
     ap.add_argument("--methods", nargs="+", default=["top-down", "flat"])
     ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--seed-offset", type=int, default=0, help="first seed (seeds OFFSET..OFFSET+N-1)")
     ap.add_argument("--num-envs", type=int, default=256)
     ap.add_argument("--threshold", type=float, default=0.85)
     ap.add_argument("--max-steps", type=int, default=300_000, help="env-step budget per level")
@@ -150,7 +151,7 @@ def main() -> None:
             run_dir = out / f"stack{n}_{method}"
             resume = args.resume and ckpt.load_meta(run_dir) is not None
             sweep = parse_sweep_flags(args.sweep) if args.sweep else None
-            res = run(f"fetch/stack{n}", cfg, list(range(args.seeds)), run_dir, env_overrides=env_over,
+            res = run(f"fetch/stack{n}", cfg, list(range(args.seed_offset, args.seed_offset + args.seeds)), run_dir, env_overrides=env_over,
                       progress=args.progress, resume=resume, sweep=sweep)
             points = (res["points"] if sweep else [{"overrides": {}, "results": res}])
             for k, point in enumerate(points):
