@@ -208,7 +208,7 @@ class HierarchyTrainer(ft.FinetunePhase):
 
     def _chunk(self):
         """One compiled chunk for every seed at its own level; its stats and windows [S, U],
-        and the learner's update metrics [S, U] (None unless TensorBoard is written)."""
+        and the learner's update metrics [S, U] (None unless TensorBoard is on)."""
         S, a = len(self.seeds), self.arrays
         active = self._per_seed([i < self.num_stages for i in self.state.stage], bool)
         learner = self._place_small(self._options())
@@ -232,7 +232,8 @@ class HierarchyTrainer(ft.FinetunePhase):
             self.state.compile_seconds += time.perf_counter() - t0
         state, stats, metrics, (window, task_window), windows = self._compiled(*args)
         stats, windows = dist.gather((stats, windows))  # [S, U, ...], the same on every process
-        metrics = dist.gather(metrics) if self._tb is not None else None
+        # a collective: every process gathers when TensorBoard is on (only process 0 writes)
+        metrics = dist.gather(metrics) if self.cfg.tensorboard else None
         if not all_finite(state.learner.params):
             where = ", ".join(f"seed {self.seeds[s]} level {self._plan(s).level} "
                               f"({self._plan(s).name})" for s in self._training())
