@@ -151,7 +151,8 @@ def main() -> None:
             run_dir = out / f"stack{n}_{method}"
             resume = args.resume and ckpt.load_meta(run_dir) is not None
             sweep = parse_sweep_flags(args.sweep) if args.sweep else None
-            res = run(f"fetch/stack{n}", cfg, list(range(args.seed_offset, args.seed_offset + args.seeds)), run_dir, env_overrides=env_over,
+            seeds = list(range(args.seed_offset, args.seed_offset + args.seeds))
+            res = run(f"fetch/stack{n}", cfg, seeds, run_dir, env_overrides=env_over,
                       progress=args.progress, resume=resume, sweep=sweep)
             points = (res["points"] if sweep else [{"overrides": {}, "results": res}])
             for k, point in enumerate(points):

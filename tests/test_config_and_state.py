@@ -33,7 +33,7 @@ def test_sources_override_in_order(tmp_path):
         resolve_config(agent={"gamma": 0.5})
 
 
-def test_the_shipped_config_files_load_and_build_their_learner(tmp_path):
+def test_the_shipped_config_files_load_and_build_their_learner():
     # every preset under configs/ is a valid TrainConfig whose agent settings PPO accepts,
     # and a flag still wins over the file
     from pathlib import Path

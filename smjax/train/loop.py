@@ -145,9 +145,8 @@ class HierarchyTrainer(ft.FinetunePhase):
             t0 = time.perf_counter()
             stats, windows, metrics = self._chunk()
             dt = time.perf_counter() - t0
-            training = self._training()  # before _account's counts: whose chunk this was
             candidates, task_candidates = self._account(stats, windows)
-            self._log_learner(metrics, training)
+            self._log_learner(metrics)
             st.chunks += 1
             passed = self._accept(candidates)
             task_passed = self._accept_task(task_candidates)
@@ -242,22 +241,29 @@ class HierarchyTrainer(ft.FinetunePhase):
         self.arrays = a.replace(state=state, window=window, task_window=task_window)
         return stats, windows, metrics
 
-    def _log_learner(self, metrics, seeds: list[int]) -> None:
+    def _tb_level_tag(self, s: int) -> str:
+        """Seed ``s``'s TensorBoard prefix for its level (``_plan``: in fine-tuning, the level
+        of the option whose turn it is)."""
+        plan = self._plan(s)
+        return f"seed_{self.seeds[s]}/level_{plan.level}_{plan.name}"
+
+    def _log_learner(self, metrics) -> None:
         """TensorBoard: each training seed's learner metrics of the chunk (the mean over its
         updates: PPO's entropy, approx_kl, losses, ...), at the level's or the phase's env
         steps, under ``seed_S/level_L_NAME/learner/`` or ``seed_S/finetune/NAME/learner/``."""
         if self._tb is None or metrics is None:
             return
         means = {name: np.asarray(value, np.float64) for name, value in metrics.items()}
-        for s in seeds:
-            plan, seed = self._plan(s), self.seeds[s]
+        for s in self._training():  # (the chunk's seeds: stages change only after this)
             if self._finetuning(s):
-                tag, steps = f"seed_{seed}/finetune/{plan.name}", self.state.finetune[s].env_steps
+                tag = f"seed_{self.seeds[s]}/finetune/{self._plan(s).name}"
+                counters = self.state.finetune[s]
             else:
-                tag, steps = f"seed_{seed}/level_{plan.level}_{plan.name}", self.state.level[s].env_steps
+                tag, counters = self._tb_level_tag(s), self.state.level[s]
             for name, value in means.items():
                 if value.ndim == 2:  # [S, U]: one scalar per update
-                    self._tb.add_scalar(f"{tag}/learner/{name}", float(np.mean(value[s])), steps)
+                    self._tb.add_scalar(f"{tag}/learner/{name}", float(np.mean(value[s])),
+                                        counters.env_steps)
 
     def _evaluate(self, t_start: float) -> dict:
         a, st = self.arrays, self.state
@@ -347,7 +353,7 @@ class HierarchyTrainer(ft.FinetunePhase):
                     self.state.curves.append([seed, plan.level, plan.name, episodes, env_steps,
                                               running, s])
                 if self._tb is not None and running is not None:
-                    tag = f"seed_{seed}/level_{plan.level}_{plan.name}"
+                    tag = self._tb_level_tag(s)
                     self._tb.add_scalar(f"{tag}/running_success", running, env_steps)
                     self._tb.add_scalar(f"{tag}/episodes", episodes, env_steps)
             if (c.running is not None and c.running >= cfg.threshold
@@ -388,8 +394,7 @@ class HierarchyTrainer(ft.FinetunePhase):
             c, cfg = st.level[s], self._level_cfg(s)
             success = c.record_gate(result, s, st.chunks + cfg.gate_interval)
             if self._tb is not None:
-                tag = f"seed_{self.seeds[s]}/level_{plans[s].level}_{plans[s].name}"
-                self._tb.add_scalar(f"{tag}/gate_success", success, c.env_steps)
+                self._tb.add_scalar(f"{self._tb_level_tag(s)}/gate_success", success, c.env_steps)
             if success >= cfg.threshold:
                 passed.append(s)
         return passed
