@@ -5,7 +5,8 @@
 # (with a `time` line) as log_NAME.txt. SEEDS (default 10) seeds per run.
 set -u
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/runs
-if ! python3 -c "import mujoco" 2>/dev/null; then
+# (the wheels matter for Fetch only; Craft and football run without them)
+if [ -d .whl ] && ! python3 -c "import mujoco" 2>/dev/null; then
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
     --target /tmp/site .whl/*.whl || exit 1
   export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH}

@@ -24,6 +24,14 @@ An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over
   program (a hyper-parameter sweep). Their values live in the learner state
   (``state.hp``, float32 scalars, one per slot under ``vmap``) rather than being closed
   over, so a sweep compiles once; every other field fixes shapes or program structure
+* ``hidden_size``: 0 for a memoryless policy. A *recurrent* learner (``hidden_size`` H > 0)
+  carries a memory ``h [B, H]`` from each of its decisions to its next one:
+  ``act(state, obs, mask, key, h) -> (ActOutput, h')`` and
+  ``policy_logits(params, obs, h) -> (logits, h')``. The runner keeps one memory per
+  option and environment, zero when the option is pushed, advanced only on the option's
+  own decisions; ``update`` reads the memory that entered each tick in
+  ``Transition.hidden`` (``smjax.agents.ppo`` trains through it by backpropagation
+  through time)
 """
 from __future__ import annotations
 
@@ -44,6 +52,7 @@ class Agent(NamedTuple):
     frozen_policy: str = "sample"
     warm_start: Callable[[Any, Any], Any] = lambda state, params: state.replace(params=params)
     sweepable: tuple[str, ...] = ()
+    hidden_size: int = 0
 
 
 def hyper_params(config: Any, names: tuple[str, ...]) -> dict[str, jax.Array]:

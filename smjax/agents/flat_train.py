@@ -54,6 +54,10 @@ def make_train(
     if not isinstance(space, spaces.Discrete) or space.shape != ():
         raise ValueError(f"flat training needs a single Discrete action space, got {space!r}")
     num_actions = space.n
+    if agent.hidden_size:
+        raise ValueError("flat_train runs memoryless learners only; a recurrent learner "
+                         f"(hidden_size {agent.hidden_size}) trains through smjax.train "
+                         "(`smjax train ... --method flat`)")
     stats_env = EpisodeStatistics(env)
 
     def train(key: jax.Array):

@@ -93,6 +93,29 @@ class ActorCritic(nn.Module):
         return logits, value[..., 0]
 
 
+class RecurrentActorCritic(nn.Module):
+    """``ActorCritic`` with a memory: a GRU cell of width ``memory_size`` carried from one
+    of the policy's decisions to the next. ``(x [N, F], h [N, H]) -> (logits [N, A],
+    values [N], h' [N, H])``; the actor's features drive the cell, and both heads read
+    their own features beside ``h'``, so a zero memory still gives a feed-forward policy's
+    inputs."""
+
+    num_actions: int
+    hidden_sizes: Sequence[int] = (64, 64)
+    activation: str = "tanh"
+    memory_size: int = 64
+
+    @nn.compact
+    def __call__(self, x: jax.Array, h: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+        actor_features = MLP(self.hidden_sizes, self.activation, name="actor_torso")(x)
+        critic_features = MLP(self.hidden_sizes, self.activation, name="critic_torso")(x)
+        h, _ = nn.GRUCell(self.memory_size, name="memory")(h, actor_features)
+        logits = _dense(self.num_actions, 0.01, name="policy_head")(
+            jnp.concatenate([actor_features, h], -1))
+        value = _dense(1, 1.0, name="value_head")(jnp.concatenate([critic_features, h], -1))
+        return logits, value[..., 0], h
+
+
 class QNetwork(nn.Module):
     """Action values ``[N, A]`` from flat observations ``[N, F]``."""
 

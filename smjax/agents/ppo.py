@@ -28,6 +28,7 @@ from smjax.agents import config as checks
 from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
 from smjax.agents.networks import (
     ActorCritic,
+    RecurrentActorCritic,
     epsilon_mixture_log_probs,
     flatten_obs,
     masked_entropy,
@@ -64,6 +65,12 @@ class PPOConfig:
     hidden_sizes: tuple[int, ...] = (64, 64)
     activation: str = "tanh"
     shared_torso: bool = False
+    # A recurrent policy (0: memoryless): a GRU memory of this width, carried from each of
+    # the option's decisions to its next (``networks.RecurrentActorCritic``), trained by
+    # backpropagation through the rollout, minibatches then being sets of environments.
+    # For observations that cannot tell places apart: a memoryless policy that picks
+    # greedily loops where it cannot see what changed (benchmarks/RESULTS.md section 17).
+    recurrent_size: int = 0
     normalize_advantages: bool = True
     clip_value_loss: bool = True
     adam_eps: float = 1e-5
@@ -80,6 +87,10 @@ class PPOConfig:
         checks.check_positive_int(self, "num_minibatches")
         checks.check_range(self, "target_kl", 0.0)
         checks.check_hidden_sizes(self)
+        checks.check_non_negative_int(self, "recurrent_size")
+        if self.recurrent_size and self.shared_torso:
+            raise ValueError("recurrent_size > 0 needs shared_torso=False (the recurrent "
+                             "network gives actor and critic their own torso)")
         checks.check_choice(self, "activation", ("tanh", "relu", "gelu", "elu", "swish"))
         checks.check_range(self, "adam_eps", 0.0, low_open=True)
 
@@ -105,10 +116,15 @@ def make_network(num_actions: int, hidden_sizes, activation: str, shared_torso: 
     return ActorCritic(num_actions, tuple(hidden_sizes), activation, shared_torso)
 
 
-def init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions, hp):
-    """Shared ``init`` of the actor-critic-network learners."""
+def init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions, hp,
+                               memory_size: int = 0):
+    """Shared ``init`` of the actor-critic-network learners (``memory_size``: a recurrent
+    network's memory width, 0 for a memoryless one)."""
     network = network_for(checks.check_num_actions(num_actions))
-    params = network.init(key, flatten_obs(jnp.asarray(example_obs)[None]))
+    inputs = (flatten_obs(jnp.asarray(example_obs)[None]),)
+    if memory_size:
+        inputs += (jnp.zeros((1, memory_size), jnp.float32),)
+    params = network.init(key, *inputs)
     zero = jnp.zeros((), jnp.int32)
     return PolicyGradientState(params, optimizer.init(params), zero, zero, zero, zero, hp)
 
@@ -124,6 +140,11 @@ def sample_actions(network_for, params, obs, mask, key, epsilon=None) -> ActOutp
     """
     network = network_for(num_actions_of(params))
     logits, value = network.apply(params, flatten_obs(obs))
+    return sample_from_logits(logits, value, mask, key, epsilon)
+
+
+def sample_from_logits(logits, value, mask, key, epsilon=None) -> ActOutput:
+    """``sample_actions`` from a network's outputs already computed."""
     log_probs = masked_log_softmax(logits, mask)
     if epsilon is not None:
         log_probs = epsilon_mixture_log_probs(log_probs, mask, epsilon)
@@ -153,6 +174,32 @@ def minibatch_indices(key: jax.Array, decision: jax.Array, num_minibatches: int)
     return idx.reshape(size, num_minibatches).T, real.reshape(size, num_minibatches).T
 
 
+def unroll(network: RecurrentActorCritic, params, inputs) -> tuple[jax.Array, jax.Array]:
+    """Logits and values ``[T, B, ...]`` of a recurrent policy replayed over a rollout.
+
+    ``inputs = (obs [T, B, F], memory [T, B, H], decided [T, B], done [T, B])``: the flat
+    observations, the memory that entered each tick (``Transition.hidden``), the ticks
+    where the policy chose, and its episode ends. Within one run of the option the memory
+    is recomputed from the run's earlier decisions, so gradients flow back through them;
+    a run's first decision in the rollout starts from the memory the runner recorded
+    (zero where the run begins there; a run that began in an earlier rollout is where the
+    backpropagation is truncated). With the parameters that acted, the replay gives the
+    rollout's own logits (tests/test_recurrent.py)."""
+    obs, stored, decided, done = inputs
+
+    def step(carry, row):
+        h, linked = carry
+        x, h_stored, dec, end = row
+        h_in = jnp.where(linked[:, None], h, h_stored)
+        logits, value, h_out = network.apply(params, x, h_in)
+        h = jnp.where(dec[:, None], h_out, h)
+        return (h, (linked | dec) & ~end), (logits, value)
+
+    init = (jnp.zeros_like(stored[0]), jnp.zeros(decided.shape[1:], bool))
+    _, (logits, value) = jax.lax.scan(step, init, (obs, stored, decided, done))
+    return logits, value
+
+
 def apply_if(pred: jax.Array, new: Any, old: Any) -> Any:
     """Keep ``old`` when ``pred`` is False (a step with nothing to learn from)."""
     return jax.tree.map(lambda n, o: jnp.where(pred, n, o), new, old)
@@ -165,13 +212,17 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         optax.clip_by_global_norm(config.max_grad_norm),
         optax.scale_by_adam(eps=config.adam_eps),
     )
+    memory = config.recurrent_size
 
-    def network_for(num_actions: int) -> ActorCritic:
+    def network_for(num_actions: int):
+        if memory:
+            return RecurrentActorCritic(num_actions, tuple(config.hidden_sizes),
+                                        config.activation, memory)
         return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso)
 
     def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
         return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions,
-                                          hyper_params(config, SWEEPABLE))
+                                          hyper_params(config, SWEEPABLE), memory)
 
     def act(state: PolicyGradientState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
         return sample_actions(network_for, state.params, obs, mask, key)
@@ -179,9 +230,19 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
     def policy_logits(params, obs: jax.Array) -> jax.Array:
         return logits_of(network_for, params, obs)
 
-    def loss_fn(params, batch, hp):
-        obs, action, mask, old_log_prob, old_value, adv, ret, weight = batch
-        logits, value = network_for(mask.shape[-1]).apply(params, obs)
+    def act_recurrent(state: PolicyGradientState, obs: jax.Array, mask: jax.Array,
+                      key: jax.Array, hidden: jax.Array) -> tuple[ActOutput, jax.Array]:
+        network = network_for(num_actions_of(state.params))
+        logits, value, hidden = network.apply(state.params, flatten_obs(obs), hidden)
+        return sample_from_logits(logits, value, mask, key), hidden
+
+    def policy_logits_recurrent(params, obs: jax.Array, hidden: jax.Array):
+        logits, _, hidden = network_for(num_actions_of(params)).apply(
+            params, flatten_obs(obs), hidden)
+        return logits, hidden
+
+    def loss_terms(logits, value, batch, hp):
+        action, mask, old_log_prob, old_value, adv, ret, weight = batch
         log_prob = take_action(masked_log_softmax(logits, mask), action)
         log_ratio = log_prob - old_log_prob
         ratio = jnp.exp(log_ratio)
@@ -205,6 +266,14 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         }
         return total, aux
 
+    def loss_fn(params, batch, hp):
+        mask = batch[2]
+        if memory:  # [T, B_mb, ...] sequences: whole rollouts of some environments
+            logits, value = unroll(network_for(mask.shape[-1]), params, batch[0])
+        else:       # [N] ticks
+            logits, value = network_for(mask.shape[-1]).apply(params, batch[0])
+        return loss_terms(logits, value, batch[1:], hp)
+
     def update(state: PolicyGradientState, traj: Transition, key: jax.Array):
         traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
         num_ticks, num_envs = traj.reward.shape[:2]
@@ -219,26 +288,36 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
             mean = masked_mean(adv, decision)
             var = masked_mean(jnp.square(adv - mean), decision)
             adv = jnp.where(decision, (adv - mean) / (jnp.sqrt(var) + 1e-8), 0.0)
-        flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
         # Fields of non-decision ticks are unspecified (may be NaN): zero them so that no
         # NaN can reach a gradient through the weight-0 entries.
         unused_to_zero = lambda x: jnp.where(decision, x, 0)  # noqa: E731
+        obs = flatten_obs(traj.obs, batch_dims=2)
+        if memory:  # the unroll also needs the memory, decided and done of every tick
+            obs = (obs, traj.hidden.astype(jnp.float32), traj.decision.astype(bool),
+                   traj.done.astype(bool))
         data = (
-            flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1),
-            flat(unused_to_zero(traj.action)).astype(jnp.int32),
-            flat(traj.action_mask).astype(bool),
-            flat(unused_to_zero(traj.log_prob)).astype(jnp.float32),
-            flat(unused_to_zero(traj.value)).astype(jnp.float32),
-            flat(adv),
-            flat(ret),
-            flat(decision),
+            obs,
+            unused_to_zero(traj.action).astype(jnp.int32),
+            traj.action_mask.astype(bool),
+            unused_to_zero(traj.log_prob).astype(jnp.float32),
+            unused_to_zero(traj.value).astype(jnp.float32),
+            adv,
+            ret,
+            decision,
         )
+        if memory:  # minibatches are sets of environments, each with its whole rollout
+            take = lambda x, idx: x[:, idx]  # noqa: E731
+            weight_of = lambda w, real: w & real[None, :]  # noqa: E731
+        else:       # minibatches are sets of ticks
+            data = jax.tree.map(lambda x: x.reshape((num_items,) + x.shape[2:]), data)
+            take = lambda x, idx: x[idx]  # noqa: E731
+            weight_of = lambda w, real: w & real  # noqa: E731
 
         def minibatch_step(carry, mb):
             params, opt_state, grad_steps, stopped = carry
             idx, real = mb
-            batch = jax.tree.map(lambda x: x[idx], data)
-            batch = batch[:-1] + (jnp.logical_and(batch[-1], real),)
+            batch = jax.tree.map(lambda x: take(x, idx), data)
+            batch = batch[:-1] + (weight_of(batch[-1], real),)
             (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, state.hp)
             updates, new_opt_state = optimizer.update(grads, opt_state, params)
             updates = scale_by_lr(updates, state.hp["learning_rate"])
@@ -255,7 +334,9 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
             return (params, opt_state, grad_steps + step.astype(jnp.int32), stopped), aux
 
         def epoch_step(carry, epoch_key):
-            idx, real = minibatch_indices(epoch_key, data[-1], config.num_minibatches)
+            # environments are dealt like ticks whose every one holds a decision
+            deal = jnp.ones((num_envs,), bool) if memory else data[-1]
+            idx, real = minibatch_indices(epoch_key, deal, config.num_minibatches)
             return jax.lax.scan(minibatch_step, carry, (idx, real))
 
         carry = (state.params, state.opt_state, state.grad_steps, jnp.zeros((), bool))
@@ -283,4 +364,7 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         )
         return new_state, metrics
 
+    if memory:
+        return Agent("ppo", init, act_recurrent, update, policy_logits_recurrent,
+                     sweepable=SWEEPABLE, hidden_size=memory)
     return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE)

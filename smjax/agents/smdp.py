@@ -195,7 +195,8 @@ def carry_pending(pending: Transition, traj: Transition) -> tuple[Transition, Tr
                            discount=jnp.where(active, nxt.discount, 1.0))
         return nxt, None
 
-    empty = no_pending(pending.obs, pending.action_mask.shape[-1])
+    empty = no_pending(pending.obs, pending.action_mask.shape[-1],
+                       0 if pending.hidden is None else pending.hidden.shape[-1])
     start = jax.tree.map(lambda e, p: e.astype(p.dtype), empty, pending)
     new_pending, _ = jax.lax.scan(step, start, extended)
     return extended, new_pending

@@ -32,6 +32,8 @@ class Transition(NamedTuple):
     reward: jax.Array       # learner reward received after this tick's step
     discount: jax.Array     # per-tick discount factor (gamma or gamma**d)
     done: jax.Array         # bool: the learner's episode ended after this tick
+    # a recurrent learner's memory entering this tick ([H]; None for memoryless learners)
+    hidden: jax.Array | None = None
 
 
 class ActOutput(NamedTuple):
@@ -40,7 +42,7 @@ class ActOutput(NamedTuple):
     value: jax.Array
 
 
-def no_pending(obs: jax.Array, num_actions: int) -> Transition:
+def no_pending(obs: jax.Array, num_actions: int, hidden_size: int = 0) -> Transition:
     """The empty pending row for a batch (``obs [B, ...]``): no decision, reward 0, discount 1.
 
     A *pending* row is a learner decision whose option was still running when a rollout
@@ -52,4 +54,5 @@ def no_pending(obs: jax.Array, num_actions: int) -> Transition:
         action_mask=jnp.ones(batch + (int(num_actions),), bool),
         log_prob=jnp.zeros(batch, jnp.float32), value=jnp.zeros(batch, jnp.float32),
         decision=jnp.zeros(batch, bool), reward=jnp.zeros(batch, jnp.float32),
-        discount=jnp.ones(batch, jnp.float32), done=jnp.zeros(batch, bool))
+        discount=jnp.ones(batch, jnp.float32), done=jnp.zeros(batch, bool),
+        hidden=jnp.zeros(batch + (hidden_size,), jnp.float32) if hidden_size else None)

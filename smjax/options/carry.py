@@ -32,6 +32,9 @@ class EnvCarry:
     task_return: jax.Array      # float: environment reward collected in this episode
     pending: Transition         # the learner's decision still running at the last rollout end
     pool: "ResetPool | None" = None  # pre-generated episode starts (None: reset in every tick)
+    # a recurrent policy's memory per option [B, O, H] (None: memoryless policies): zero
+    # while the option is off the stack, advanced on its own decisions
+    hidden: jax.Array | None = None
 
 
 @struct.dataclass

@@ -38,6 +38,7 @@ class Decision(NamedTuple):
     teleported: jax.Array       # int32: the template teleported (NO_OPTION: none)
     scripted: jax.Array         # int32: the template whose controller acts (NO_OPTION: none)
     learner_decided: jax.Array  # bool: the learner chose in this tick
+    chose: jax.Array | None = None  # bool [O]: the options that chose in this tick
 
 
 def deciding_options(learned: jax.Array, has_policy: jax.Array, has_teleport: jax.Array,
@@ -75,6 +76,7 @@ def decide(stack: ExecutionStack, frozen_choice: jax.Array, learner_choice: jax.
     primitive = jnp.asarray(0, jnp.int32)
     teleported = jnp.asarray(NO_OPTION, jnp.int32)
     scripted = jnp.asarray(NO_OPTION, jnp.int32)
+    chose = jnp.zeros((num_options,), bool)
     for _ in range(stack.capacity):
         top = jnp.maximum(stack_top(stack), 0)
         is_learner = top == learner
@@ -84,6 +86,7 @@ def decide(stack: ExecutionStack, frozen_choice: jax.Array, learner_choice: jax.
         run_script = open_ & is_scripted
         chooses = open_ & ~is_scripted
         learner_decided = learner_decided | (chooses & is_learner)
+        chose = chose.at[top].set(chose[top] | chooses)
         is_prim = choice < num_primitives
         tpl = jnp.clip(choice - num_primitives + 1, 0, num_options - 1)
         push = chooses & ~is_prim & pushable[tpl] & callable_[tpl]
@@ -94,7 +97,7 @@ def decide(stack: ExecutionStack, frozen_choice: jax.Array, learner_choice: jax.
         teleported = jnp.where(teleport, tpl, teleported)
         decided = decided | run_script | take_prim | teleport
         stack = stack_push(stack, tpl, push)
-    return Decision(stack, primitive, teleported, scripted, learner_decided)
+    return Decision(stack, primitive, teleported, scripted, learner_decided, chose)
 
 
 # ---- step ---------------------------------------------------------------------------

@@ -33,7 +33,7 @@ from smjax.options.carry import (  # noqa: F401 - re-exported: the runner's publ
 from smjax.options.hierarchy import Hierarchy, check_success
 from smjax.options.memory import make_memory
 from smjax.options.realise import families, primitive_action, run_family
-from smjax.options.stack import stack_init
+from smjax.options.stack import stack_init, stack_members
 
 # how the tick evaluates the policy bank: only the learned options that can decide (a loop
 # over them), every option at once (one batched apply), or by the backend (auto)
@@ -106,6 +106,8 @@ class HierarchyRunner:
                                      np.int32))
                          for name in hierarchy.scripted]
         self.has_policy = np.array([n in hierarchy.policies for n in hierarchy.option_names])
+        # a recurrent learner's memory width (0: memoryless policies, no memory carried)
+        self.memory_size = 0 if agent is None else int(agent.hidden_size)
 
     # ---- per-environment template evaluations (unbatched) ------------------
     def _per_option(self, state, field: str, root, dtype) -> jax.Array:
@@ -163,8 +165,10 @@ class HierarchyRunner:
         zeros_b = jnp.zeros((num_envs,), bool)
         pool = self._new_pool(k_pool) if self.reset_pool else None
         zeros_f = jnp.zeros((num_envs,), jnp.float32)
+        hidden = (jnp.zeros((num_envs, self.h.num_options, self.memory_size), jnp.float32)
+                  if self.memory_size else None)
         return EnvCarry(state, obs, stack, zeros_b, zeros_f, zeros_f,
-                        no_pending(obs, self.h.num_actions), pool)
+                        no_pending(obs, self.h.num_actions, self.memory_size), pool, hidden)
 
     def _fresh_starts(self, key: jax.Array, n: int):
         obs, state = jax.vmap(self.env.reset_env, (0, None))(jax.random.split(key, n),
@@ -212,8 +216,8 @@ class HierarchyRunner:
         teleport_on = self.teleports_on(controls)
         deciding = self.deciding(controls.learned, teleport_on)
         callable_ = self.callable_options(deciding, controls.learner, teleport_on)
-        act, learner_mask, frozen = self._choices(carry, learner_state, bank_params, controls,
-                                                  callable_, k_act, k_frozen)
+        act, learner_mask, frozen, memory = self._choices(
+            carry, learner_state, bank_params, controls, callable_, k_act, k_frozen)
         pushable = phases.pushable_options(
             deciding, controls.learner, jnp.asarray(self.has_controller),
             jnp.asarray(self.has_teleport), teleport_on)
@@ -246,29 +250,54 @@ class HierarchyRunner:
             obs=carry.obs, action=act.action, action_mask=learner_mask, log_prob=act.log_prob,
             value=act.value, decision=decision.learner_decided, reward=acc.reward,
             discount=discount, done=acc.learner_done,
+            hidden=None if memory is None else carry.hidden[:, learner_idx],
         )
-        return self._restart(carry, acc, popped.stack, obs, state, controls, k_reset), \
-            transition, acc.ends
+        carry = self._restart(carry, acc, popped.stack, obs, state, controls, k_reset)
+        if memory is not None:
+            carry = carry.replace(hidden=self._next_memory(carry, decision.chose, memory,
+                                                           acc.reset))
+        return carry, transition, acc.ends
+
+    def _next_memory(self, carry: EnvCarry, chose: jax.Array, memory: jax.Array,
+                     reset: jax.Array) -> jax.Array:
+        """[B, O, H]: each option's memory after this tick: advanced where the option chose
+        (``memory``: every option's memory after choosing now), zero where it is no longer
+        on the stack or its episode was reset, so each run of an option starts from zero."""
+        hidden = jnp.where(chose[..., None], memory, carry.hidden)
+        on = jax.vmap(lambda st: stack_members(st, self.h.num_options))(carry.stack)
+        return jnp.where((on & ~reset[:, None])[..., None], hidden, 0.0)
 
     def _choices(self, carry: EnvCarry, learner_state, bank_params, controls: Controls,
                  callable_: jax.Array, k_act: jax.Array, k_frozen: jax.Array):
         """What each policy would pick now: the learner's act [B] (and its action mask
         [B, A]), and every frozen policy's masked pick [B, O] (read only where that option
-        is on the stack and decides), a scripted policy's where its option is not learned."""
+        is on the stack and decides), a scripted policy's where its option is not learned;
+        with a recurrent policy also every option's memory after choosing now [B, O, H]
+        (the learner's from its own network; else None)."""
         init_ok = jax.vmap(self._initiation)(carry.env_state)                     # [B, O]
         masks = jax.vmap(lambda i: self.action_masks(i, callable_))(init_ok)      # [B, O, A]
         learner_mask = masks[:, jnp.maximum(controls.learner, 0)]                 # [B, A]
         B = carry.obs.shape[0]
+        memory = None
         if self.agent is None:  # every decision scripted: no network runs
             zeros = jnp.zeros((B,), jnp.float32)
             act = ActOutput(jnp.zeros((B,), jnp.int32), zeros, zeros)
             frozen = jnp.zeros((B, self.h.num_options), jnp.int32)
         else:
+            learner = jnp.maximum(controls.learner, 0)
+            own = () if carry.hidden is None else (carry.hidden[:, learner],)
             if self.acts_frozen(controls):
-                act = self._act_frozen(learner_state, carry.obs, learner_mask, k_act, controls)
+                act = self._act_frozen(learner_state, carry.obs, learner_mask, k_act, controls,
+                                       *own)
             else:
-                act = self.agent.act(learner_state, carry.obs, learner_mask, k_act)
-            logits = self.frozen_logits(bank_params, carry.obs, controls)         # [O, B, A]
+                act = self.agent.act(learner_state, carry.obs, learner_mask, k_act, *own)
+            logits = self.frozen_logits(bank_params, carry.obs, controls, carry.hidden)
+            if carry.hidden is not None:
+                (act, own_next), (logits, memory) = act, logits
+                memory = jnp.swapaxes(memory, 0, 1)                                # [B, O, H]
+                memory = memory.at[:, learner].set(
+                    jnp.where(controls.learner >= 0, own_next, memory[:, learner]))
+            # logits [O, B, A]
             logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
             frozen = self._frozen_pick(logits, k_frozen, controls)
             frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)
@@ -279,7 +308,7 @@ class HierarchyRunner:
             for j, (option, _, _) in enumerate(self.policies):
                 frozen = frozen.at[:, option].set(
                     jnp.where(controls.learned[option], frozen[:, option], picks[:, j]))
-        return act, learner_mask, frozen
+        return act, learner_mask, frozen, memory
 
     def _scripted_picks(self, key: jax.Array, state, masks: jax.Array) -> jax.Array:
         """int32 [len(policies)]: each scripted policy's pick as an action id (one
@@ -334,6 +363,7 @@ class HierarchyRunner:
             task_return=acc.task_return,
             pending=carry.pending,  # the engine updates it once per rollout (carry_pending)
             pool=pool,
+            hidden=carry.hidden,  # the tick's memory update follows (``_next_memory``)
         )
 
     def task_success(self, state, info: dict) -> jax.Array | None:
@@ -361,27 +391,33 @@ class HierarchyRunner:
         weight = jnp.asarray(controls.side_cost, jnp.float32)
         return jnp.where(learner_on & ~is_root, weight * (c0 - discount * c1), 0.0)
 
-    def _act_frozen(self, learner_state, obs, mask, key, controls: Controls) -> ActOutput:
+    def _act_frozen(self, learner_state, obs, mask, key, controls: Controls, *hidden):
         """The learner picks as the bank will run it once frozen (the level's gate); with no
         learner (evaluation: ``controls.learner`` NO_OPTION, or no ``learner_state`` at all)
-        its network is not run."""
+        its network is not run. A recurrent learner passes its memory ``hidden`` and gets
+        ``(act, memory after)`` back."""
         if learner_state is None:  # nobody learns: the learner's choice is never read
-            logits = jnp.zeros(mask.shape, jnp.float32)
+            out = (jnp.zeros(mask.shape, jnp.float32),) + hidden
         else:
             def own():
-                return self.agent.policy_logits(learner_state.params, obs)
+                out = self.agent.policy_logits(learner_state.params, obs, *hidden)
+                return out if hidden else (out,)
 
             shape = jax.eval_shape(own)
-            logits = jax.lax.cond(controls.learner >= 0, own,
-                                  lambda: jnp.zeros(shape.shape, shape.dtype))
-        action = self._frozen_pick(jnp.where(mask, logits, -1e9), key, controls,
+            out = jax.lax.cond(controls.learner >= 0, own,
+                               lambda: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shape))
+        action = self._frozen_pick(jnp.where(mask, out[0], -1e9), key, controls,
                                     controls.learner).astype(jnp.int32)
         zeros = jnp.zeros(action.shape, jnp.float32)
-        return ActOutput(action, zeros, zeros)
+        act = ActOutput(action, zeros, zeros)
+        return (act, out[1]) if hidden else act
 
-    def frozen_logits(self, bank_params, obs: jax.Array, controls: Controls) -> jax.Array:
+    def frozen_logits(self, bank_params, obs: jax.Array, controls: Controls,
+                      hidden: jax.Array | None = None):
         """[O, B, A] scores of the frozen policies that can decide now: the learned options
-        other than the learner (the rest are never read and stay 0).
+        other than the learner (the rest are never read and stay 0). A recurrent policy
+        reads each option's memory ``hidden`` [B, O, H] and gives ``(scores, every
+        option's memory after choosing [O, B, H])``.
 
         ``frozen_eval="learned"``: a loop over just those options, not a vmap over the
         whole bank: in top-down training most of the bank is not learned yet (level 1: none
@@ -391,19 +427,23 @@ class HierarchyRunner:
         GPU one wide kernel costs less than a loop of small ones); the unneeded rows are
         computed but never read.
         """
+        memory = () if hidden is None else (jnp.swapaxes(hidden, 0, 1),)   # [O, B, H]
         if self.frozen_eval == "all":
-            return jax.vmap(self.agent.policy_logits, (0, None))(bank_params, obs)
+            return jax.vmap(self.agent.policy_logits, (0, None) + (0,) * len(memory))(
+                bank_params, obs, *memory)
         num_options = self.h.num_options
         need = controls.learned & (jnp.arange(num_options) != controls.learner)
         order = jnp.argsort(~need)  # the needed option ids first (argsort is stable)
         first = jax.tree.map(lambda p: p[0], bank_params)
-        shape = jax.eval_shape(self.agent.policy_logits, first, obs)
-        out = jnp.zeros((num_options,) + shape.shape, shape.dtype)
+        shape = jax.eval_shape(self.agent.policy_logits, first, obs,
+                               *(m[0] for m in memory))
+        out = jax.tree.map(lambda s: jnp.zeros((num_options,) + s.shape, s.dtype), shape)
 
         def one(i, out):
             option = order[i]
             params = jax.tree.map(lambda p: p[option], bank_params)
-            return out.at[option].set(self.agent.policy_logits(params, obs))
+            new = self.agent.policy_logits(params, obs, *(m[option] for m in memory))
+            return jax.tree.map(lambda o, n: o.at[option].set(n), out, new)
 
         return jax.lax.fori_loop(0, need.sum(), one, out)
 

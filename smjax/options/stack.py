@@ -69,3 +69,9 @@ def stack_tick(stack: ExecutionStack) -> ExecutionStack:
 def stack_contains(stack: ExecutionStack, option: jax.Array) -> jax.Array:
     live = jnp.arange(stack.capacity) < stack.depth
     return jnp.any(jnp.logical_and(live, stack.option == option))
+
+
+def stack_members(stack: ExecutionStack, num_options: int) -> jax.Array:
+    """bool [num_options]: the options on the stack."""
+    live = jnp.arange(stack.capacity) < stack.depth
+    return jnp.any(live[:, None] & (stack.option[:, None] == jnp.arange(num_options)), axis=0)
