@@ -98,21 +98,34 @@ class RecurrentActorCritic(nn.Module):
     of the policy's decisions to the next. ``(x [N, F], h [N, H]) -> (logits [N, A],
     values [N], h' [N, H])``; the actor's features drive the cell, and both heads read
     their own features beside ``h'``, so a zero memory still gives a feed-forward policy's
-    inputs."""
+    inputs. ``encode`` (the torsos, which do not read the memory) and ``decide`` (the cell
+    and heads) are apart so that a replay over a rollout runs the wide first layers once
+    for every tick and only the small cell step by step."""
 
     num_actions: int
     hidden_sizes: Sequence[int] = (64, 64)
     activation: str = "tanh"
     memory_size: int = 64
 
-    @nn.compact
+    def setup(self):
+        self.actor_torso = MLP(self.hidden_sizes, self.activation)
+        self.critic_torso = MLP(self.hidden_sizes, self.activation)
+        self.memory = nn.GRUCell(self.memory_size)
+        self.policy_head = _dense(self.num_actions, 0.01)
+        self.value_head = _dense(1, 1.0)
+
     def __call__(self, x: jax.Array, h: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-        actor_features = MLP(self.hidden_sizes, self.activation, name="actor_torso")(x)
-        critic_features = MLP(self.hidden_sizes, self.activation, name="critic_torso")(x)
-        h, _ = nn.GRUCell(self.memory_size, name="memory")(h, actor_features)
-        logits = _dense(self.num_actions, 0.01, name="policy_head")(
-            jnp.concatenate([actor_features, h], -1))
-        value = _dense(1, 1.0, name="value_head")(jnp.concatenate([critic_features, h], -1))
+        return self.decide(self.encode(x), h)
+
+    def encode(self, x: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """(actor features, critic features) of flat observations (any leading axes)."""
+        return self.actor_torso(x), self.critic_torso(x)
+
+    def decide(self, features, h: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+        actor, critic = features
+        h, _ = self.memory(h, actor)
+        logits = self.policy_head(jnp.concatenate([actor, h], -1))
+        value = self.value_head(jnp.concatenate([critic, h], -1))
         return logits, value[..., 0], h
 
 

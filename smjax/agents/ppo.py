@@ -186,17 +186,19 @@ def unroll(network: RecurrentActorCritic, params, inputs) -> tuple[jax.Array, ja
     backpropagation is truncated). With the parameters that acted, the replay gives the
     rollout's own logits (tests/test_recurrent.py)."""
     obs, stored, decided, done = inputs
+    # the torsos do not read the memory: all ticks at once, only the cell step by step
+    features = network.apply(params, obs, method=network.encode)
 
     def step(carry, row):
         h, linked = carry
-        x, h_stored, dec, end = row
+        feats, h_stored, dec, end = row
         h_in = jnp.where(linked[:, None], h, h_stored)
-        logits, value, h_out = network.apply(params, x, h_in)
+        logits, value, h_out = network.apply(params, feats, h_in, method=network.decide)
         h = jnp.where(dec[:, None], h_out, h)
         return (h, (linked | dec) & ~end), (logits, value)
 
     init = (jnp.zeros_like(stored[0]), jnp.zeros(decided.shape[1:], bool))
-    _, (logits, value) = jax.lax.scan(step, init, (obs, stored, decided, done))
+    _, (logits, value) = jax.lax.scan(step, init, (features, stored, decided, done))
     return logits, value
 
 
