@@ -74,7 +74,7 @@ class CraftEnv(Environment[CraftState, CraftParams]):
 
     def templates(self) -> dict:
         if self._templates is None:
-            self._templates = templates.make_templates()
+            self._templates = templates.make_templates(self.config.side_cost)
         return dict(self._templates)
 
     def hierarchies(self) -> dict:
@@ -91,14 +91,18 @@ def make_craft(
     fixed_map: bool = False,
     max_steps: int | None = None,
     map_seed: int = 0,
+    side_cost: str = "held",
 ) -> tuple[CraftEnv, CraftParams]:
-    """Build ``(env, params)`` for a Craft task, validating every override value."""
+    """Build ``(env, params)`` for a Craft task, validating every override value.
+    ``side_cost``: what the ``give_X`` templates' side cost charges (fine-tuning's shaping):
+    "held", every unit held but X; "surplus", only units beyond what X's recipe consumes."""
     observation = parse_choice("observation", observation, OBSERVATIONS)
+    side_cost = parse_choice("side_cost", side_cost, templates.SIDE_COSTS)
     fixed_map = parse_bool("fixed_map", fixed_map)
     if max_steps is not None:
         max_steps = parse_int("max_steps", max_steps, 1, INT32_MAX)
     map_seed = parse_int("map_seed", map_seed, 0, INT32_MAX)
-    env = CraftEnv(CraftConfig(task=task, observation=observation))
+    env = CraftEnv(CraftConfig(task=task, observation=observation, side_cost=side_cost))
     fixed_state = reset.new_state(jax.random.key(map_seed), env.config.world) if fixed_map else None
     return env, make_params(task, max_steps=max_steps, fixed_state=fixed_state)
 
@@ -110,11 +114,13 @@ def _factory(task: str):
         fixed_map: bool = False,
         max_steps: int | None = None,
         map_seed: int = 0,
+        side_cost: str = "held",
     ) -> tuple[CraftEnv, CraftParams]:
         return make_craft(task, observation=observation, fixed_map=fixed_map,
-                          max_steps=max_steps, map_seed=map_seed)
+                          max_steps=max_steps, map_seed=map_seed, side_cost=side_cost)
 
-    factory.__doc__ = f"craft/{task}: overrides observation, fixed_map, max_steps, map_seed."
+    factory.__doc__ = (f"craft/{task}: overrides observation, fixed_map, max_steps, map_seed, "
+                       "side_cost.")
     return factory
 
 

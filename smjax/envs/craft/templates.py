@@ -70,19 +70,45 @@ def _held_fn(item_id: int, held: bool) -> Callable:
     return fn
 
 
-def _side_cost_fn(item_id: int) -> Callable:
+def recipe_counts(item: str) -> dict[str, int]:
+    """Units of every item that one ``item`` consumes down its recipe tree (a treasure's tool
+    counts once), the item itself excluded: ``recipe_counts("ladder")`` has wood 2."""
+    counts: dict[str, int] = {}
+    for i in C.ingredients(item):
+        counts[i] = counts.get(i, 0) + 1
+        for k, n in recipe_counts(i).items():
+            counts[k] = counts.get(k, 0) + n
+    return counts
+
+
+SIDE_COSTS = ("held", "surplus")
+
+
+def _side_cost_fn(item: str, kind: str) -> Callable:
     # the task's reward takes 0.1 per unit of any item held but the goal: a give_X run that
-    # ends holding more than its teleport would have (X) is charged the same way
+    # ends holding more than its teleport would have (X) is charged the same way. "held"
+    # charges every other unit, the ingredients X's recipe uses too (their charge comes at
+    # once, the credit when crafting consumes them later); "surplus" charges only the units
+    # beyond what X's recipe tree consumes, so gathering ingredients is free.
+    item_id = C.KIND_ID[item]
+    free = np.zeros(C.NUM_KINDS, np.float32)
+    if kind == "surplus":
+        for k, n in recipe_counts(item).items():
+            free[C.KIND_ID[k]] = n
     others = np.ones(C.NUM_KINDS, np.float32)
     others[item_id] = 0.0
 
     def fn(state: CraftState, params: CraftParams) -> jax.Array:
-        return 0.1 * jnp.sum(state.inventory.astype(jnp.float32) * others)
+        extra = jnp.maximum(state.inventory.astype(jnp.float32) - free, 0.0)
+        return 0.1 * jnp.sum(extra * others)
     return fn
 
 
-def make_templates() -> dict[str, OptionTemplate]:
-    """``give_<item>`` for the 6 primitives and 18 crafted items."""
+def make_templates(side_cost: str = "held") -> dict[str, OptionTemplate]:
+    """``give_<item>`` for the 6 primitives and 18 crafted items; ``side_cost`` picks what
+    their side cost charges (``SIDE_COSTS``, see ``_side_cost_fn``)."""
+    if side_cost not in SIDE_COSTS:
+        raise ValueError(f"side_cost must be one of {SIDE_COSTS}, got {side_cost!r}")
     out = {}
     for item in C.ITEMS:
         item_id = C.KIND_ID[item]
@@ -96,7 +122,7 @@ def make_templates() -> dict[str, OptionTemplate]:
             teleport=Parametric(give_teleport, teleport_data(item)),
             nominal_steps=C.NOMINAL_STEPS[item],
             description=f"obtain one {item} {how}".strip(),
-            side_cost=_side_cost_fn(item_id),
+            side_cost=_side_cost_fn(item, side_cost),
         )
     return out
 

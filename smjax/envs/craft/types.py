@@ -53,6 +53,7 @@ class CraftConfig:
 
     task: str = "get_gem"
     observation: str = "paper"
+    side_cost: str = "held"
 
     def __post_init__(self):
         C.check_task(self.task)
