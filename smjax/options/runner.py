@@ -27,6 +27,9 @@ import numpy as np
 from smjax.core.env import select_tree
 from smjax.core.transition import ActOutput, Transition, no_pending
 from smjax.options import phases
+from smjax.options.bank import (  # noqa: F401 - re-exported
+    FROZEN_EVALS, PolicyBank, option_temperatures,
+)
 from smjax.options.carry import (  # noqa: F401 - re-exported: the runner's public types
     NO_OPTION, Controls, EnvCarry, EpisodeEnds, ResetPool, TickStats,
 )
@@ -35,18 +38,10 @@ from smjax.options.memory import make_memory
 from smjax.options.realise import families, primitive_action, run_family
 from smjax.options.stack import stack_init, stack_members
 
-# how the tick evaluates the policy bank: only the learned options that can decide (a loop
-# over them), every option at once (one batched apply), or by the backend (auto)
-FROZEN_EVALS = ("auto", "learned", "all")
 _NEVER = np.iinfo(np.int32).max // 2
 
 
-def option_temperatures(root: float, templates: float, num_options: int) -> np.ndarray:
-    """float32 [O]: the root's (option 0) temperature, then every template's."""
-    return np.asarray([root] + [templates] * (num_options - 1), np.float32)
-
-
-class HierarchyRunner:
+class HierarchyRunner(PolicyBank):
     """Compiles a hierarchy over an environment into batched tick/reset functions."""
 
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, gamma: float,
@@ -391,102 +386,11 @@ class HierarchyRunner:
         weight = jnp.asarray(controls.side_cost, jnp.float32)
         return jnp.where(learner_on & ~is_root, weight * (c0 - discount * c1), 0.0)
 
-    def _act_frozen(self, learner_state, obs, mask, key, controls: Controls, *hidden):
-        """The learner picks as the bank will run it once frozen (the level's gate); with no
-        learner (evaluation: ``controls.learner`` NO_OPTION, or no ``learner_state`` at all)
-        its network is not run. A recurrent learner passes its memory ``hidden`` and gets
-        ``(act, memory after)`` back."""
-        if learner_state is None:  # nobody learns: the learner's choice is never read
-            out = (jnp.zeros(mask.shape, jnp.float32),) + hidden
-        else:
-            def own():
-                out = self.agent.policy_logits(learner_state.params, obs, *hidden)
-                return out if hidden else (out,)
-
-            shape = jax.eval_shape(own)
-            out = jax.lax.cond(controls.learner >= 0, own,
-                               lambda: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shape))
-        action = self._frozen_pick(jnp.where(mask, out[0], -1e9), key, controls,
-                                    controls.learner).astype(jnp.int32)
-        zeros = jnp.zeros(action.shape, jnp.float32)
-        act = ActOutput(action, zeros, zeros)
-        return (act, out[1]) if hidden else act
-
-    def frozen_logits(self, bank_params, obs: jax.Array, controls: Controls,
-                      hidden: jax.Array | None = None):
-        """[O, B, A] scores of the frozen policies that can decide now: the learned options
-        other than the learner (the rest are never read and stay 0). A recurrent policy
-        reads each option's memory ``hidden`` [B, O, H] and gives ``(scores, every
-        option's memory after choosing [O, B, H])``.
-
-        ``frozen_eval="learned"``: a loop over just those options, not a vmap over the
-        whole bank: in top-down training most of the bank is not learned yet (level 1: none
-        of it), and a policy's first layer on a wide observation is the tick's largest cost
-        on a CPU. Under a ``vmap`` over seeds the loop runs as often as the seed with the
-        most learned options needs. ``"all"``: one batched apply over the whole bank (on a
-        GPU one wide kernel costs less than a loop of small ones); the unneeded rows are
-        computed but never read.
-        """
-        memory = () if hidden is None else (jnp.swapaxes(hidden, 0, 1),)   # [O, B, H]
-        if self.frozen_eval == "all":
-            return jax.vmap(self.agent.policy_logits, (0, None) + (0,) * len(memory))(
-                bank_params, obs, *memory)
-        num_options = self.h.num_options
-        need = controls.learned & (jnp.arange(num_options) != controls.learner)
-        order = jnp.argsort(~need)  # the needed option ids first (argsort is stable)
-        first = jax.tree.map(lambda p: p[0], bank_params)
-        shape = jax.eval_shape(self.agent.policy_logits, first, obs,
-                               *(m[0] for m in memory))
-        out = jax.tree.map(lambda s: jnp.zeros((num_options,) + s.shape, s.dtype), shape)
-
-        def one(i, out):
-            option = order[i]
-            params = jax.tree.map(lambda p: p[option], bank_params)
-            new = self.agent.policy_logits(params, obs, *(m[option] for m in memory))
-            return jax.tree.map(lambda o, n: o.at[option].set(n), out, new)
-
-        return jax.lax.fori_loop(0, need.sum(), one, out)
-
-    def frozen_temperature_of(self, controls: Controls) -> jax.Array | float:
-        """The temperature frozen policies pick at (0: greedy): one for every option, or
-        one per option ([O], ``Controls.temperature``)."""
-        if controls.temperature is not None:
-            return controls.temperature
-        if self.frozen_policy == "greedy":
-            return 0.0
-        if self.template_temperature in (None, self.frozen_temperature):
-            return self.frozen_temperature
-        return option_temperatures(self.frozen_temperature, self.template_temperature,
-                                   self.h.num_options)
-
-    def acts_frozen(self, controls: Controls) -> bool:
-        """Whether the learner picks as it will once frozen (``Controls.acts_frozen``, else
-        as the runner was built)."""
-        return self.learner_acts_frozen if controls.acts_frozen is None else controls.acts_frozen
-
     def resets_on_learner_end(self, controls: Controls) -> jax.Array | bool:
         """Whether an environment is reset when the learner's option ends."""
         if controls.continue_episodes is None:
             return self.reset_on_learner_end
         return ~controls.continue_episodes
-
-    def _frozen_pick(self, logits: jax.Array, key: jax.Array, controls: Controls,
-                     option: jax.Array | None = None) -> jax.Array:
-        """A frozen policy's choice from masked scores (last axis): argmax at temperature 0,
-        else a sample at the temperature. ``logits`` are every option's [O, B, A], or, with
-        ``option``, that one option's [B, A] (a per-option temperature then picks its own)."""
-        temperature = self.frozen_temperature_of(controls)
-        if isinstance(temperature, float):  # known when tracing: compute only that pick
-            if temperature == 0.0:
-                return jnp.argmax(logits, -1)
-            return jax.random.categorical(key, logits / temperature, -1)
-        temperature = jnp.asarray(temperature, jnp.float32)
-        if temperature.ndim == 1:  # one per option
-            temperature = (temperature[jnp.maximum(option, 0)] if option is not None
-                           else temperature.reshape((-1,) + (1,) * (logits.ndim - 2)))
-        sample = jax.random.categorical(
-            key, logits / jnp.maximum(temperature, 1e-6)[..., None], -1)
-        return jnp.where(temperature > 0, sample, jnp.argmax(logits, -1))
 
     def _run_family(self, fams, key, state, chosen, action, *, controls: bool):
         """``realise.run_family`` with this runner's environment parameters."""
