@@ -209,6 +209,37 @@ def test_resume_during_finetuning_is_exact(tmp_path, monkeypatch):
         assert _strip_timing(migrated) == expected
 
 
+@pytest.mark.parametrize("go_on", [True, False])
+def test_a_new_turn_goes_on_with_the_episodes_in_flight(monkeypatch, go_on):
+    # a later turn hands the same episodes to its learner (the old learner's pending
+    # decision and episode record cleared); off, every turn starts fresh episodes
+    from smjax.train.loop import HierarchyTrainer
+    start, seen = HierarchyTrainer._start_levels, []
+
+    def spy(self, seeds):
+        later = [s for s in seeds if self._finetuning(s) and self.state.finetune[s].turns]
+        before = jax.tree.map(np.asarray, self.arrays.state.carry)
+        start(self, seeds)
+        if later:
+            seen.append((later, before, jax.tree.map(np.asarray, self.arrays.state.carry)))
+
+    monkeypatch.setattr(HierarchyTrainer, "_start_levels", spy)
+    cfg = TrainConfig(**(SMALL | {"finetune_threshold": 1.0, "finetune_max_episodes": 300,
+                                  "finetune_continue_episodes": go_on}))
+    run(make_keydoor(), cfg, [0, 1], progress=False)
+    assert seen
+    for later, before, after in seen:
+        for s in later:
+            kept = [np.array_equal(b[s], a[s]) for b, a in zip(
+                jax.tree.leaves((before.env_state, before.obs, before.stack, before.task_return)),
+                jax.tree.leaves((after.env_state, after.obs, after.stack, after.task_return)))]
+            assert all(kept) if go_on else not all(kept)
+            assert not after.learner_started[s].any() and not after.learner_return[s].any()
+            assert not after.pending.decision[s].any()
+    with pytest.raises(ConfigError, match="finetune_continue_episodes"):
+        TrainConfig(finetune_continue_episodes="yes")
+
+
 @settings(max_examples=200, deadline=None)
 @given(st.integers(1, 5), st.integers(0, 4), st.data())
 def test_converged_options_rest_at_most_max_rest_turns_in_a_row(num_options, max_rest, data):

@@ -165,6 +165,16 @@ class HierarchyRunner(PolicyBank):
         return EnvCarry(state, obs, stack, zeros_b, zeros_f, zeros_f,
                         no_pending(obs, self.h.num_actions, self.memory_size), pool, hidden)
 
+    def hand_over(self, carry: EnvCarry) -> EnvCarry:
+        """The same environments, episodes and stacks for a new learner: what belonged to
+        the old one (its pending decision, whether it acted in this episode, its return) is
+        cleared, so the new learner's record starts at its own first decision."""
+        B = carry.obs.shape[0]
+        zeros_f = jnp.zeros((B,), jnp.float32)
+        return carry.replace(
+            learner_started=jnp.zeros((B,), bool), learner_return=zeros_f,
+            pending=no_pending(carry.obs, self.h.num_actions, self.memory_size))
+
     def _fresh_starts(self, key: jax.Array, n: int):
         obs, state = jax.vmap(self.env.reset_env, (0, None))(jax.random.split(key, n),
                                                              self.env_params)

@@ -114,6 +114,13 @@ class TrainConfig:
         about one chunk; short turns let every option improve a little in each round, and
         reached in 6,000-8,000 episodes what turns of 2,000 reached in 20,000:
         benchmarks/RESULTS.md section 13).
+      finetune_continue_episodes: episodes in flight when a turn ends go on into the next
+        turn (only the learner changes hands: its pending decision and episode record start
+        afresh). Off, every turn started all environments on fresh episodes, so each turn's
+        longest episodes (the failing ones, ~1 in 3 of a 250-episode turn over 128
+        environments) were cut off unfinished: no option learned how they end, and the
+        phase's running success, counting finished episodes only, read ~0.05 above a
+        fresh evaluation (benchmarks/RESULTS.md section 18).
       finetune_max_episodes: the phase's budget in environment episodes, per seed (at
         12,000, get_gem's and get_gold's totals with the levels stay under 21,000 and
         19,000 episodes, and their final success is 0.03-0.04 lower: RESULTS section 13;
@@ -165,6 +172,7 @@ class TrainConfig:
     finetune_option_threshold: float = 0.95
     finetune_turn_episodes: int = 250
     finetune_max_rest: int = 0
+    finetune_continue_episodes: bool = True
     finetune_max_episodes: int = 20_000
     finetune_agent: dict = field(default_factory=dict)
     finetune_side_cost: bool = True
@@ -220,6 +228,8 @@ class TrainConfig:
         need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
         need(isinstance(self.gate, bool), "gate", "true or false")
         need(isinstance(self.finetune_side_cost, bool), "finetune_side_cost", "true or false")
+        need(isinstance(self.finetune_continue_episodes, bool), "finetune_continue_episodes",
+             "true or false")
         for name in ("finetune_side_cost_weight", "level_side_cost_weight"):
             value = getattr(self, name)
             need(isinstance(value, (int, float)) and not isinstance(value, bool)

@@ -113,6 +113,8 @@ class Engine:
         # jitted, so it also slices a bank sharded over processes
         self._bank_entry0 = jax.jit(lambda bank: jax.tree.map(lambda p: p[:, 0], bank))
         self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
+        # the same episodes for a new learner (a fine-tuning turn's): leading axis S
+        self.hand_over = jax.jit(jax.vmap(self.runner.hand_over))
 
     @property
     def success_bounded(self) -> bool:

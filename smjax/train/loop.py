@@ -308,6 +308,13 @@ class HierarchyTrainer(ft.FinetunePhase):
             warm = warm.replace(hp={**warm.hp, **self.finetune_hp})
             learner = select_seeds(self._mask(tuning), warm, learner)
         fresh = SeedState(self.engine.reset(k_reset, starts), learner, k_run)
+        # a later fine-tuning turn goes on with the episodes in flight (config docs)
+        go_on = [s for s in tuning
+                 if self.cfg.finetune_continue_episodes and self.state.finetune[s].turns]
+        if go_on:
+            carry = select_seeds(self._mask(go_on), self.engine.hand_over(a.state.carry),
+                                 fresh.carry)
+            fresh = fresh._replace(carry=carry)
         empty = SuccessWindow.empty(len(self.seeds), self.cfg.window_slots)  # a new level's
         keys, state, window = select_seeds(self._mask(seeds), (keys, fresh, empty),
                                            (a.keys, a.state, a.window))
