@@ -140,6 +140,14 @@ def test_a_checkpoint_from_before_a_new_config_field_resumes_unless_it_differs(m
     changed = run_identity("keydoor", cfg.replace(level_side_cost_weight=1.0), [0, 1], {})
     with pytest.raises(ConfigError, match="level_side_cost_weight: checkpoint 0.0 vs now 1.0"):
         check_resumable("some/dir", changed)
+    # a field whose default changed what runs do (fine-tuning turns that keep their
+    # episodes): a checkpoint without it ran the old way, so it resumes only that way
+    old = {k: v for k, v in identity.items() if k != "finetune_continue_episodes"}
+    monkeypatch.setattr(ckpt, "shared_meta", lambda out: {"meta": {"run": old}})
+    with pytest.raises(ConfigError, match="finetune_continue_episodes: checkpoint False vs now True"):
+        check_resumable("some/dir", identity)
+    legacy = run_identity("keydoor", cfg.replace(finetune_continue_episodes=False), [0, 1], {})
+    assert check_resumable("some/dir", legacy)
 
 
 def test_checkpoint_formats_this_smjax_cannot_read_are_refused_by_name(tmp_path):

@@ -42,14 +42,20 @@ def run_identity(task_name: str, cfg: TrainConfig, seeds: list[int], env_overrid
     return json.loads(json.dumps(identity))
 
 
+# new config fields whose default is not what the versions before them did: a checkpoint
+# without the field ran as this says (a resume at the new default is refused, by name)
+LEGACY_VALUES = {"finetune_continue_episodes": False}
+
+
 def check_resumable(out_dir, identity: dict) -> bool:
     """True if ``out_dir`` holds a checkpoint of this very run; refuse a different one."""
     info = ckpt.shared_meta(out_dir)
     if info is None:
         return False
-    # a config field added since the checkpoint was written takes its default there: a new
-    # field's default keeps the behaviour of the versions before it
-    saved = TrainConfig().to_dict() | info["meta"]["run"]
+    # a config field added since the checkpoint was written takes its default there (a new
+    # field's default keeps the behaviour of the versions before it), or, where the default
+    # changed that behaviour, the value the older versions ran with (``LEGACY_VALUES``)
+    saved = TrainConfig().to_dict() | LEGACY_VALUES | info["meta"]["run"]
     # (checkpoints of older versions recorded RUN_SETTINGS in the identity too)
     diff = [k for k in config_differences(saved, identity) if k not in RUN_SETTINGS]
     if diff:
