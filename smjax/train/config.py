@@ -124,8 +124,8 @@ class TrainConfig:
       finetune_max_episodes: the phase's budget in environment episodes, per seed (at
         12,000, get_gem's and get_gold's totals with the levels stay under 21,000 and
         19,000 episodes, and their final success is 0.03-0.04 lower: RESULTS section 13;
-        with PPO's ``update_epochs=8`` the curves flatten by ~15,000, and 16,000 brings
-        get_gold to 0.89-0.91 in ~20,000 episodes in all: section 15). The phase keeps
+        with PPO's ``update_epochs=8``, 16,000 brings get_gold to 0.89-0.91 in ~20,000
+        episodes in all: section 15). The phase keeps
         climbing past 20,000: get_gem 0.77 -> 0.82 at 60,000 -> 0.84 at 100,000, with the
         compact observation 0.82 -> 0.85 at 60,000; get_gold passes 0.92 after ~28,000
         (section 18).

@@ -17,9 +17,9 @@ continuation are traced per seed), so fine-tuning compiles nothing new and an up
 costs what a level's does. A turn ends once its option's running success reaches
 ``finetune_option_threshold`` or after ``finetune_turn_episodes``; its policy then goes
 back into the bank, and the next turn's learner takes over the same episodes in flight
-(``TrainConfig.finetune_continue_episodes``). An option whose turn ended at that threshold is converged: it rests
-(its next turns go to the others) for up to ``finetune_max_rest`` turns in a row (default
-0: never). Whole-task episodes end by themselves in every turn, so the task's
+(``TrainConfig.finetune_continue_episodes``). An option whose turn ended at that threshold
+is converged: it rests (its next turns go to the others) for up to ``finetune_max_rest``
+turns in a row (default 0: never). Whole-task episodes end by themselves in every turn, so the task's
 teleport-free running success is known after every update: once it reaches
 ``finetune_threshold`` a gate (fresh episodes of the hierarchy with the learner frozen
 in, no teleports) decides, and the phase ends when it passes or after
