@@ -153,7 +153,8 @@ def build_config(args, saved: dict | None):
                          ("num_envs", args.num_envs), ("threshold", args.threshold),
                          ("max_episodes_per_level", args.max_episodes),
                          ("max_steps_per_level", args.max_steps), ("finetune", args.finetune),
-                         ("finetune_max_episodes", args.finetune_episodes)):
+                         ("finetune_max_episodes", args.finetune_episodes),
+                         ("finetune_mode", args.finetune_mode)):
         if value is not None:
             sets[field] = value
     if args.tensorboard:

@@ -116,6 +116,11 @@ class Controls:
       exploring through the agent's ``act``: the gate's and evaluation's mode (None: as
       the runner was built). Static because the two modes read different learner state
       (evaluation has none), so they cannot share one traced program.
+    joint: a Python bool, not traced: every learned option learns at once (joint
+      fine-tuning, ``smjax.options.joint``): the tick takes a learner state per option
+      (leading axis O) instead of one learner and a bank, each learned option explores
+      through its own ``act``, and the tick's record has one row per option ([B, O]).
+      ``learner`` is NO_OPTION then.
     """
 
     learner: jax.Array
@@ -127,3 +132,4 @@ class Controls:
     side_cost: jax.Array | None = None
     gamma: jax.Array | None = None
     acts_frozen: bool | None = None
+    joint: bool = False

@@ -26,7 +26,7 @@ import numpy as np
 
 from smjax.core.env import select_tree
 from smjax.core.transition import ActOutput, Transition, no_pending
-from smjax.options import phases
+from smjax.options import joint, phases
 from smjax.options.bank import (  # noqa: F401 - re-exported
     FROZEN_EVALS, PolicyBank, option_temperatures,
 )
@@ -226,9 +226,11 @@ class HierarchyRunner(PolicyBank):
         pushable = phases.pushable_options(
             deciding, controls.learner, jnp.asarray(self.has_controller),
             jnp.asarray(self.has_teleport), teleport_on)
+        # (joint: nobody is "the learner"; every option's pick is in ``frozen``)
+        own = frozen[:, 0] if controls.joint else act.action
         decision = jax.vmap(lambda s, f, l: phases.decide(
             s, f, l, learner=controls.learner, learned=deciding, pushable=pushable,
-            callable_=callable_, num_primitives=self.P))(carry.stack, frozen, act.action)
+            callable_=callable_, num_primitives=self.P))(carry.stack, frozen, own)
         state_in, action, teleported = self._realise(decision, carry.env_state, teleport_on,
                                                       k_ctrl, k_tp)
         obs, state, reward, terminated, truncated, info = phases.step(
@@ -241,22 +243,30 @@ class HierarchyRunner(PolicyBank):
         gamma = self.gamma if controls.gamma is None else controls.gamma
         discount = phases.tick_discount(teleported, self.nominal, gamma)
         learner_idx = jnp.maximum(controls.learner, 0)
-        shaping = self._side_cost_shaping(carry.env_state, state, discount, popped.learner_on,
-                                          learner_idx, controls.learner <= 0, controls)
+        on = joint.options_on(decision.stack, self.h.num_options)  # before the pops
+        shaping = self._side_costs(carry.env_state, state, discount, on, controls)
         acc = phases.account(
             started=carry.learner_started, learner_return=carry.learner_return,
             task_return=carry.task_return, decided=decision.learner_decided, reward=reward,
             env_done=terminated | truncated, popped=popped,
-            learner_satisfied=sat[:, learner_idx], shaping=shaping,
+            learner_satisfied=sat[:, learner_idx],
+            shaping=shaping if isinstance(shaping, float) else shaping[:, learner_idx],
             info_success=self.task_success(state, info),
             learner=controls.learner, start=controls.start,
             reset_on_learner_end=self.resets_on_learner_end(controls))
-        transition = Transition(
-            obs=carry.obs, action=act.action, action_mask=learner_mask, log_prob=act.log_prob,
-            value=act.value, decision=decision.learner_decided, reward=acc.reward,
-            discount=discount, done=acc.learner_done,
-            hidden=None if memory is None else carry.hidden[:, learner_idx],
-        )
+        if controls.joint:  # every option's own record (joint.py)
+            transition = joint.option_transitions(
+                carry.obs, act, learner_mask, decision.chose, controls.learned,
+                joint.option_rewards(reward, sat, on, shaping), discount,
+                joint.option_ends(on, joint.options_on(popped.stack, self.h.num_options),
+                                  acc.reset))
+        else:
+            transition = Transition(
+                obs=carry.obs, action=act.action, action_mask=learner_mask,
+                log_prob=act.log_prob, value=act.value, decision=decision.learner_decided,
+                reward=acc.reward, discount=discount, done=acc.learner_done,
+                hidden=None if memory is None else carry.hidden[:, learner_idx],
+            )
         carry = self._restart(carry, acc, popped.stack, obs, state, controls, k_reset)
         if memory is not None:
             carry = carry.replace(hidden=self._next_memory(carry, decision.chose, memory,
@@ -284,6 +294,11 @@ class HierarchyRunner(PolicyBank):
         learner_mask = masks[:, jnp.maximum(controls.learner, 0)]                 # [B, A]
         B = carry.obs.shape[0]
         memory = None
+        if controls.joint:  # every option explores through its own learner
+            act = joint.every_option_acts(self.agent, learner_state, carry.obs, masks, k_act)
+            frozen = self._scripted(act.action.T.astype(jnp.int32), carry, masks, controls,
+                                    k_frozen)
+            return act, masks, frozen, None
         if self.agent is None:  # every decision scripted: no network runs
             zeros = jnp.zeros((B,), jnp.float32)
             act = ActOutput(jnp.zeros((B,), jnp.int32), zeros, zeros)
@@ -306,14 +321,20 @@ class HierarchyRunner(PolicyBank):
             logits = jnp.where(jnp.swapaxes(masks, 0, 1), logits, -1e9)
             frozen = self._frozen_pick(logits, k_frozen, controls)
             frozen = jnp.swapaxes(frozen, 0, 1).astype(jnp.int32)
-        if self.policies:
-            # its own key stream, so that hierarchies without scripted policies keep theirs
-            keys = jax.random.split(jax.random.fold_in(k_frozen, 0x5C41), B)
-            picks = jax.vmap(self._scripted_picks)(keys, carry.env_state, masks)  # [B, n]
-            for j, (option, _, _) in enumerate(self.policies):
-                frozen = frozen.at[:, option].set(
-                    jnp.where(controls.learned[option], frozen[:, option], picks[:, j]))
-        return act, learner_mask, frozen, memory
+        return act, learner_mask, self._scripted(frozen, carry, masks, controls, k_frozen), memory
+
+    def _scripted(self, frozen: jax.Array, carry: EnvCarry, masks: jax.Array,
+                  controls: Controls, k_frozen: jax.Array) -> jax.Array:
+        """``frozen`` [B, O] with each scripted policy's pick where its option is not learned."""
+        if not self.policies:
+            return frozen
+        # its own key stream, so that hierarchies without scripted policies keep theirs
+        keys = jax.random.split(jax.random.fold_in(k_frozen, 0x5C41), frozen.shape[0])
+        picks = jax.vmap(self._scripted_picks)(keys, carry.env_state, masks)  # [B, n]
+        for j, (option, _, _) in enumerate(self.policies):
+            frozen = frozen.at[:, option].set(
+                jnp.where(controls.learned[option], frozen[:, option], picks[:, j]))
+        return frozen
 
     def _scripted_picks(self, key: jax.Array, state, masks: jax.Array) -> jax.Array:
         """int32 [len(policies)]: each scripted policy's pick as an action id (one
@@ -383,18 +404,19 @@ class HierarchyRunner(PolicyBank):
             return jnp.asarray(info["success"], jnp.float32)
         return None
 
-    def _side_cost_shaping(self, before, after, discount, learner_on, learner_idx, is_root,
-                           controls: Controls):
-        """A template learner's extra reward ``c(s) - discount * c(s')`` for its template's
-        ``side_cost`` c, times the weight ``controls.side_cost`` (0 elsewhere). Summed over
-        the option's run it telescopes to minus the discounted cost it ends with, above what
-        it started with."""
+    def _side_costs(self, before, after, discount, on, controls: Controls):
+        """Every template's extra reward [B, O] ``c(s) - discount * c(s')`` for its
+        ``side_cost`` c, times the weight ``controls.side_cost``, where it is ``on`` the
+        stack (0 for the root, and 0.0 altogether where no weight is given or no template
+        has a side cost). Summed over an option's run it telescopes to minus the discounted
+        cost it ends with, above what it started with."""
         if controls.side_cost is None or not any(t.side_cost is not None for t in self.templates):
             return 0.0
-        c0 = jax.vmap(self._side_cost)(before)[:, learner_idx]
-        c1 = jax.vmap(self._side_cost)(after)[:, learner_idx]
+        c0 = jax.vmap(self._side_cost)(before)
+        c1 = jax.vmap(self._side_cost)(after)
         weight = jnp.asarray(controls.side_cost, jnp.float32)
-        return jnp.where(learner_on & ~is_root, weight * (c0 - discount * c1), 0.0)
+        template = (jnp.arange(self.h.num_options) > 0)[None, :]
+        return jnp.where(on & template, weight * (c0 - discount[:, None] * c1), 0.0)
 
     def resets_on_learner_end(self, controls: Controls) -> jax.Array | bool:
         """Whether an environment is reset when the learner's option ends."""

@@ -14,6 +14,7 @@ METHODS = ("top-down", "bottom-up", "flat")
 ALGOS = ("ppo", "dqn", "actor-critic")
 FROZEN_POLICIES = ("auto", "greedy", "sample")
 FINETUNE_CHOICES = ("auto", "on", "off")
+FINETUNE_MODES = ("turns", "joint")
 # what ``TrainConfig.levels`` may override per template
 LEVEL_FIELDS = ("threshold", "max_episodes_per_level", "max_steps_per_level", "success_window",
                 "gamma")
@@ -99,6 +100,11 @@ class TrainConfig:
         after ``finetune_turn_episodes``; the phase ends when the teleport-free task
         success passes a gate at ``finetune_threshold`` or after
         ``finetune_max_episodes`` (docs/guide.md, "Fine-tuning").
+      finetune_mode: how the learned options keep learning: "turns" (one at a time, as
+        above) or "joint" (all at once: every learned option explores through its own
+        learner and learns from its own decisions in every episode, so none waits for its
+        turn; no turns, the phase ends as above). PPO, DQN and actor-critic alike; not
+        with a recurrent policy (docs/guide.md, "Fine-tuning").
       finetune_threshold: the teleport-free task success the phase stops at (0.92: a gate
         stops on the first draw that reaches it, a high one, so a final evaluation after
         a pass at 0.9 landed below 0.9; the margin keeps it at or above).
@@ -171,6 +177,7 @@ class TrainConfig:
     frozen_eval: str = "auto"
     policy_memory: str = "none"
     finetune: str = "auto"
+    finetune_mode: str = "turns"
     finetune_threshold: float = 0.92
     finetune_option_threshold: float = 0.95
     finetune_turn_episodes: int = 250
@@ -216,6 +223,7 @@ class TrainConfig:
         need(isinstance(self.threshold, (int, float)) and 0 < self.threshold <= 1, "threshold",
              "in (0, 1]")
         need(self.finetune in FINETUNE_CHOICES, "finetune", f"one of {FINETUNE_CHOICES}")
+        need(self.finetune_mode in FINETUNE_MODES, "finetune_mode", f"one of {FINETUNE_MODES}")
         for name in ("finetune_threshold", "finetune_option_threshold"):
             value = getattr(self, name)
             need(isinstance(value, (int, float)) and not isinstance(value, bool)

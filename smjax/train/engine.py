@@ -17,6 +17,7 @@ import numpy as np
 from smjax.agents.smdp import carry_pending
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
+from smjax.options.joint import OPTION_AXES
 from smjax.options.runner import (NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats,
                                   option_temperatures)
 from smjax.train.config import TrainConfig
@@ -103,6 +104,7 @@ class Engine:
         self.num_actions = hierarchy.num_actions
         # every argument has a seed axis: each seed trains its own level (or fine-tunes)
         self.chunk = jax.jit(jax.vmap(self._chunk), donate_argnums=(0,))
+        self.joint_chunk = jax.jit(jax.vmap(self._joint_chunk), donate_argnums=(0,))
         self.episodes = jax.jit(
             jax.vmap(self._first_episodes,
                      in_axes=(0, 0, 0, 0, 0, 0, None, 0, None, 0, 0, None)),
@@ -110,6 +112,7 @@ class Engine:
         self._compiled_episodes: dict[tuple, Any] = {}
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         self._warm = jax.jit(jax.vmap(agent.warm_start))
+        self._warm_joint = jax.jit(jax.vmap(jax.vmap(agent.warm_start)))
         # jitted, so it also slices a bank sharded over processes
         self._bank_entry0 = jax.jit(lambda bank: jax.tree.map(lambda p: p[:, 0], bank))
         self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
@@ -142,6 +145,19 @@ class Engine:
         controls = Controls(jnp.asarray(NO_OPTION), start, jnp.zeros((self.h.num_options,), bool))
         return self.runner.reset(key, controls, self.cfg.num_envs)
 
+    def joint_state(self, learners, bank, reset_keys: jax.Array, keys: jax.Array) -> SeedState:
+        """Joint fine-tuning's start, per seed (leading axis S): a learner per option
+        (axis O), each continuing from its bank entry (``learners``: fresh states [S], e.g.
+        with fine-tuning's hyper-parameters, copied once per option), fresh whole-task
+        episodes from the root, and no pending decisions (one record per option)."""
+        def per_option(x):
+            return jnp.repeat(x[:, None], self.h.num_options, axis=1)
+
+        learners = self._warm_joint(jax.tree.map(per_option, learners), bank)
+        carry = self.reset(reset_keys, jnp.zeros(reset_keys.shape[:1], jnp.int32))
+        return SeedState(carry.replace(pending=jax.tree.map(per_option, carry.pending)),
+                         learners, keys)
+
     def new_bank(self, learner_states) -> Any:
         """Policy bank per seed: [S, num_options, ...] copies of the learners' initial params."""
         n = self.h.num_options
@@ -169,7 +185,46 @@ class Engine:
         ``windows`` (a benchmark timing the chunk alone) those outputs are None."""
         controls = Controls(learner, start, learned, teleport, continue_episodes,
                             side_cost=side_cost, gamma=gamma)
-        runner, agent, cfg = self.runner, self.agent, self.cfg
+        return self._updates(state, active, controls, bank, self._learn, windows, sizes)
+
+    def _joint_chunk(self, state: SeedState, active, learned, side_cost, gamma, windows,
+                     sizes):
+        """Joint fine-tuning's chunk: ``state.learner`` holds a learner per option
+        (leading axis O, warm-started from the bank: ``joint_state``), every learned
+        option explores through its own and learns from its own record of every tick
+        (``smjax.options.joint``); the learned hierarchy alone (no teleports), whole-task
+        episodes from the root. The other arguments and the outputs are ``_chunk``'s
+        (the learner metrics per option: [U, O])."""
+        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), learned,
+                            jnp.asarray(False), jnp.asarray(False), side_cost=side_cost,
+                            gamma=gamma, acts_frozen=True, joint=True)
+        return self._updates(state, active, controls, None, self._learn_joint, windows, sizes)
+
+    def _learn(self, learner, carry: EnvCarry, traj, key):
+        """One learner's update on a rollout (its pending decisions carried over)."""
+        # Decisions whose option still runs train in the next rollout, once complete.
+        traj, pending = carry_pending(carry.pending, traj)
+        learner, metrics = self.agent.update(learner, traj, key)
+        return learner, carry.replace(pending=pending), metrics
+
+    def _learn_joint(self, learners, carry: EnvCarry, traj, key):
+        """Every option's update on its own rows of the rollout (``OPTION_AXES``), each
+        with its own pending decisions (``carry.pending``: leading axis O)."""
+        def one(learner, pending, rows, k):
+            rows, pending = carry_pending(pending, rows)
+            learner, metrics = self.agent.update(learner, rows, k)
+            return learner, pending, metrics
+
+        keys = jax.random.split(key, self.h.num_options)
+        learners, pending, metrics = jax.vmap(one, (0, 0, OPTION_AXES, 0))(
+            learners, carry.pending, traj, keys)
+        return learners, carry.replace(pending=pending), metrics
+
+    def _updates(self, state: SeedState, active, controls: Controls, bank, learn, windows,
+                 sizes):
+        """``updates_per_chunk`` x (rollout + ``learn``) under ``controls``, and the
+        running-success windows (``_chunk`` says what goes in and out)."""
+        runner, cfg = self.runner, self.cfg
 
         def update_step(c, _):
             st, win = c
@@ -185,10 +240,7 @@ class Engine:
 
             carry, (traj, stats) = jax.lax.scan(
                 tick_fn, carry, jax.random.split(k_roll, cfg.rollout_ticks))
-            # Decisions whose option still runs train in the next rollout, once complete.
-            traj, pending = carry_pending(carry.pending, traj)
-            carry = carry.replace(pending=pending)
-            learner_state, metrics = agent.update(st.learner, traj, k_upd)
+            learner_state, carry, metrics = learn(st.learner, carry, traj, k_upd)
             stats = jax.tree.map(lambda x: x.sum(0), stats)
             running = None
             if win is not None:

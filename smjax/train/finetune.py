@@ -33,12 +33,16 @@ turns took the learned hierarchy from 0.74 to 0.23 (benchmarks/RESULTS.md sectio
 """
 from __future__ import annotations
 
+import time
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from smjax.train import distributed as dist
-from smjax.train.seed_arrays import fold_in, freeze, local, select_seeds
+from smjax.train.seed_arrays import (
+    NonFiniteError, all_finite, fold_in, freeze, local, select_seeds,
+)
 
 
 def next_turn(turn: int, order: list[str], turns: list[dict], rested: dict[str, int],
@@ -69,6 +73,18 @@ def bank_rows(bank, options: jax.Array):
     return jax.tree.map(lambda b: b[rows, options], bank)
 
 
+@jax.jit
+def store_learned(mask: jax.Array, learned: jax.Array, params, bank):
+    """Per masked seed, ``params`` [S, O, ...] (a learner per option) stored in the bank at
+    every learned option; the rest of the bank is kept."""
+    keep = mask[:, None] & learned
+
+    def pick(p, b):
+        return jnp.where(keep.reshape(keep.shape + (1,) * (p.ndim - 2)), p, b)
+
+    return jax.tree.map(pick, params, bank)
+
+
 class FinetunePhase:
     """The trainer's fine-tuning steps (mixed into ``HierarchyTrainer``, whose state they
     use: ``state.finetune`` holds each seed's ``FinetuneCounters``)."""
@@ -95,8 +111,12 @@ class FinetunePhase:
         return self.state.finetune[s].episodes >= self.cfg.finetune_max_episodes
 
     def _candidate_bank(self, seeds: list[int]):
-        """(bank, learned) with these seeds' learners frozen in at their options."""
+        """(bank, learned) with these seeds' learners frozen in at their options (joint:
+        every learned option's learner at its own)."""
         a = self.arrays
+        if self.joint:
+            mask = self._place_small(self._mask(seeds))
+            return store_learned(mask, a.learned, a.joint.learner.params, a.bank), a.learned
         mask, options = self._place_small((self._mask(seeds), self._options()))
         return freeze(mask, options, a.state.learner.params, a.bank, a.learned)
 
@@ -133,8 +153,9 @@ class FinetunePhase:
             if s in passed or self._phase_spent(s):
                 phase.append(s)
                 st.finetune[s].reached = s in passed
-            elif ((running is not None and running >= cfg.finetune_option_threshold)
-                  or st.level[s].episodes >= cfg.finetune_turn_episodes):
+            elif not self.joint and (
+                    (running is not None and running >= cfg.finetune_option_threshold)
+                    or st.level[s].episodes >= cfg.finetune_turn_episodes):
                 turn.append(s)
         return phase, turn
 
@@ -144,10 +165,13 @@ class FinetunePhase:
         if not seeds:
             return
         st = self.state
-        self._freeze_learners(seeds)
+        if self.joint:
+            self._freeze_joint(seeds)
+        else:
+            self._freeze_learners(seeds)
         self._keep_better(phase_ended)
         for s in seeds:
-            st.finetune[s].turns.append({"template": self._plan(s).name,
+            st.finetune[s].turns.append({"template": "joint" if self.joint else self._plan(s).name,
                                          "episodes": st.level[s].episodes,
                                          "running_success": st.level[s].running})
             if s in phase_ended:
@@ -158,6 +182,58 @@ class FinetunePhase:
                                      rec.rested, self.cfg.finetune_option_threshold,
                                      self.cfg.finetune_max_rest)
             st.started[s] = False
+
+    # ---- joint fine-tuning (TrainConfig.finetune_mode "joint") ------------------------
+    def _joint_tuning(self, s: int) -> bool:
+        """Seed ``s`` fine-tunes all its options at once (``arrays.joint``)."""
+        return self.joint and self._finetuning(s)
+
+    def _joint_chunk(self, seeds: list[int]):
+        """Joint fine-tuning's compiled chunk for these seeds (the others keep their
+        state); its stats and windows as ``_chunk``'s, each learned option's learner
+        metrics to TensorBoard."""
+        S, a, cfg = len(self.seeds), self.arrays, self.cfg
+        weight = cfg.finetune_side_cost_weight if cfg.finetune_side_cost else 0.0
+        sizes = [[cfg.success_window, cfg.success_window]] * S
+        args = (a.joint, self._per_seed([s in seeds for s in range(S)], bool), a.learned,
+                self._per_seed([weight] * S, jnp.float32),
+                self._per_seed([self._gamma(s) for s in range(S)], jnp.float32),
+                (a.window, a.task_window), self._per_seed(sizes, jnp.int32))
+        if self._compiled_joint is None:
+            t0 = time.perf_counter()
+            self._compiled_joint = self.engine.joint_chunk.lower(*args).compile()
+            self.state.compile_seconds += time.perf_counter() - t0
+        state, stats, metrics, (window, task_window), windows = self._compiled_joint(*args)
+        stats, windows = dist.gather((stats, windows))
+        if not all_finite(state.learner.params):
+            raise NonFiniteError(f"non-finite learner parameters in chunk {self.state.chunks} "
+                                 f"(joint fine-tuning of seeds {[self.seeds[s] for s in seeds]})")
+        self.arrays = a.replace(joint=state, window=window, task_window=task_window)
+        if self._tb is not None:
+            self._log_joint(dist.gather(metrics), seeds)
+        return stats, windows
+
+    def _log_joint(self, metrics: dict, seeds: list[int]) -> None:
+        """TensorBoard: each learned option's learner metrics ([S, U, O]: the mean over the
+        chunk's updates) under ``seed_S/finetune/joint/NAME/learner/``."""
+        learned = np.asarray(dist.gather(self.arrays.learned))
+        for s in seeds:
+            for o, name in enumerate(self.engine.h.option_names):
+                if not learned[s, o]:
+                    continue
+                tag = f"seed_{self.seeds[s]}/finetune/joint/{name}/learner"
+                for key, value in metrics.items():
+                    value = np.asarray(value, np.float64)
+                    if value.ndim == 3:
+                        self._tb.add_scalar(f"{tag}/{key}", float(np.mean(value[s, :, o])),
+                                            self.state.finetune[s].env_steps)
+
+    def _freeze_joint(self, seeds: list[int]) -> None:
+        """Store these seeds' learned options' joint learners in their banks."""
+        a = jax.tree.map(local, self.arrays)
+        bank = store_learned(self._mask(seeds), a.learned, a.joint.learner.params, a.bank)
+        self.arrays = a.replace(bank=bank)
+        self._place()
 
     def _evaluate_bank(self, seeds: list[int], fold: int) -> dict:
         """These seeds' hierarchies as the bank holds them, on fresh teleport-free episodes

@@ -23,7 +23,9 @@ import numpy as np
 
 from smjax.train import checkpoint as ckpt
 from smjax.train import finetune as ft
-from smjax.train.seed_arrays import all_finite, fold_in, freeze, local, select_seeds, split_seeds
+from smjax.train.seed_arrays import (  # noqa: F401 - NonFiniteError re-exported
+    NonFiniteError, all_finite, fold_in, freeze, local, select_seeds, split_seeds,
+)
 from smjax.train import distributed as dist
 from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig
 from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
@@ -36,10 +38,6 @@ from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 # 2: learner states carry their hyper-parameters (state.hp); 3: success windows are arrays;
 # 4: the levels' bank (fine-tuning hands back the better hierarchy)
 CHECKPOINT_FORMAT = 4
-
-
-class NonFiniteError(FloatingPointError):
-    """A learner produced non-finite parameters (``run`` says which checkpoint is kept)."""
 
 
 class HierarchyTrainer(ft.FinetunePhase):
@@ -58,6 +56,10 @@ class HierarchyTrainer(ft.FinetunePhase):
         self.cfg.check_level_names([p.name for p in plans])
         # after the levels, a seed fine-tunes (one stage more) unless it is off
         self.ft_order = plan_levels(engine.h, "top-down") if self.cfg.finetune_on else []
+        self.joint = bool(self.ft_order) and self.cfg.finetune_mode == "joint"
+        if self.joint and engine.agent.hidden_size:
+            raise ConfigError("config field 'finetune_mode' = 'joint' does not run a recurrent "
+                              "policy (--agent recurrent_size): use finetune_mode 'turns'")
         self.num_stages = len(plans) + bool(self.ft_order)
         self.out_dir = out_dir
         self.writer = dist.is_writer()  # process 0: the only one that writes files or draws bars
@@ -74,9 +76,10 @@ class HierarchyTrainer(ft.FinetunePhase):
             learned=jnp.zeros((S, engine.h.num_options), bool),
             state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
             **SuccessWindow.pair(S, self.cfg.window_slots),
-            levels_bank=bank if self.ft_order else None)  # arrays are immutable: no copy
+            levels_bank=bank if self.ft_order else None,  # arrays are immutable: no copy
+            joint=(engine.joint_state(learner, bank, k_reset, keys) if self.joint else None))
         self.state = TrainerState.new(plans, S)
-        self._compiled = None
+        self._compiled = self._compiled_joint = None
         self._last_save = time.perf_counter()
         self.mesh = training_mesh(S, self.cfg.num_envs)
         self._place()
@@ -206,10 +209,25 @@ class HierarchyTrainer(ft.FinetunePhase):
         return jnp.asarray([self._plan(s).option for s in range(len(self.seeds))], jnp.int32)
 
     def _chunk(self):
-        """One compiled chunk for every seed at its own level; its stats and windows [S, U],
-        and the learner's update metrics [S, U] (None unless TensorBoard is on)."""
+        """One compiled chunk for every seed at its own level (and joint fine-tuning's for
+        the seeds in it: ``_joint_chunk``); its stats and windows [S, U], and the
+        learner's update metrics [S, U] (None unless TensorBoard is on)."""
+        joint = [s for s in self._training() if self._joint_tuning(s)]
+        out = self._level_chunk(joint) if len(joint) < len(self._training()) else None
+        if not joint:
+            return out
+        stats, windows = self._joint_chunk(joint)
+        if out is None:
+            return stats, windows, None
+        # a seed's rows are zero in the program it did not run in
+        add = lambda x, y: x + y  # noqa: E731
+        return (jax.tree.map(add, out[0], stats), jax.tree.map(add, out[1], windows), out[2])
+
+    def _level_chunk(self, skip: list[int]):
+        """``_chunk``'s compiled chunk for the seeds at a level or turn (not ``skip``)."""
         S, a = len(self.seeds), self.arrays
-        active = self._per_seed([i < self.num_stages for i in self.state.stage], bool)
+        active = self._per_seed([i < self.num_stages and s not in skip
+                                 for s, i in enumerate(self.state.stage)], bool)
         learner = self._place_small(self._options())
         start = self._per_seed([self._plan(s).start for s in range(S)], jnp.int32)
         # levels: teleports on; fine-tuning: the learned hierarchy alone, whole episodes
@@ -255,6 +273,8 @@ class HierarchyTrainer(ft.FinetunePhase):
             return
         means = {name: np.asarray(value, np.float64) for name, value in metrics.items()}
         for s in self._training():  # (the chunk's seeds: stages change only after this)
+            if self._joint_tuning(s):  # (logged by _joint_chunk)
+                continue
             if self._finetuning(s):
                 tag = f"seed_{self.seeds[s]}/finetune/{self._plan(s).name}"
                 counters = self.state.finetune[s]
@@ -303,7 +323,11 @@ class HierarchyTrainer(ft.FinetunePhase):
         starts = jnp.asarray([self._plan(s).start for s in range(len(self.seeds))], jnp.int32)
         learner = self._init_learner(k_init)
         tuning = [s for s in seeds if self._finetuning(s)]
-        if tuning:
+        if tuning and self.joint:  # a learner per option, from the bank
+            fresh = self.engine.joint_state(
+                learner.replace(hp={**learner.hp, **self.finetune_hp}), a.bank, k_reset, k_run)
+            a = a.replace(joint=select_seeds(self._mask(tuning), fresh, a.joint))
+        elif tuning:
             warm = self.engine.warm_start(learner, ft.bank_rows(a.bank, self._options()))
             warm = warm.replace(hp={**warm.hp, **self.finetune_hp})
             learner = select_seeds(self._mask(tuning), warm, learner)

@@ -45,6 +45,10 @@ def freeze(mask: jax.Array, options: jax.Array, params, bank, learned):
     return jax.tree.map(store, bank, params), learned
 
 
+class NonFiniteError(FloatingPointError):
+    """A learner produced non-finite parameters (``run`` says which checkpoint is kept)."""
+
+
 @jax.jit
 def _finite_flags(tree) -> jax.Array:
     flags = [jnp.isfinite(x).all() for x in jax.tree.leaves(tree)

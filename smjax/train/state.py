@@ -107,6 +107,10 @@ class TrainArrays:
     window: Any = None       # SuccessWindow: the learner's, emptied when a level/turn starts
     task_window: Any = None  # SuccessWindow: fine-tuning's whole-task episodes, all turns
     levels_bank: Any = None  # the bank as the levels left it (fine-tuning may hand it back)
+    # joint fine-tuning's engine.SeedState (a learner per option: [S, O, ...]; None unless
+    # TrainConfig.finetune_mode is "joint"; its leaves come last, so a checkpoint without
+    # them is a prefix)
+    joint: Any = None
 
     def as_stored(self, version: int) -> "TrainArrays":
         """The arrays a checkpoint of this format holds (format 2: no windows; 3: no

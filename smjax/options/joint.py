@@ -1,0 +1,79 @@
+"""Every learned option's own record of a tick, for joint fine-tuning.
+
+In a fine-tuning *turn* one option learns while the others act frozen, so each option
+trains on the decisions of roughly one episode in five. *Joint* fine-tuning lets every
+learned option learn from every episode: each acts through its own learner's ``act``
+(exploring as its learner does), and the tick records, per option, what that option's
+learner would have recorded had it been the only learner:
+
+* ``decision``: the option chose in this tick (``Decision.chose``) and is learned (a
+  scripted policy's or controller's choices train nothing);
+* ``reward``: the root's is the environment's reward; a template's is its F_o
+  (``satisfied`` while it is on the stack), plus its side-cost shaping where on;
+* ``done``: the option's run ended in this tick (it was on the stack before the pops and
+  is not after them), or the episode did;
+* ``action``, ``log_prob``, ``value``, ``action_mask``: its own.
+
+The observation and the per-tick discount are shared by all options. A record is a
+``Transition`` whose per-option fields are ``[B, O]`` (``[B, O, A]`` for the mask); under
+a rollout's scan they become ``[T, B, O]``, and ``OPTION_AXES`` maps a learner update over
+the option axis (the observation is not copied per option).
+
+Each option's rows are those of the option alone: its decisions, its reward, its ends;
+nothing of another option's record reaches it (tests/test_joint.py checks the masks).
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from smjax.core.transition import ActOutput, Transition
+from smjax.options.stack import ExecutionStack, stack_members
+
+# a rollout's joint record [T, B, O]: which axis of each field is the option axis (None:
+# shared by every option), for ``jax.vmap(update, in_axes=(0, ..., OPTION_AXES, ...))``
+OPTION_AXES = Transition(obs=None, action=2, action_mask=2, log_prob=2, value=2, decision=2,
+                         reward=2, discount=None, done=2, hidden=None)
+
+
+def options_on(stack: ExecutionStack, num_options: int) -> jax.Array:
+    """bool [B, O]: the options on each environment's stack."""
+    return jax.vmap(lambda st: stack_members(st, num_options))(stack)
+
+
+def option_rewards(reward: jax.Array, satisfied: jax.Array, on: jax.Array,
+                   shaping: jax.Array | float = 0.0) -> jax.Array:
+    """float [B, O]: each option's reward for this tick: the environment's ``reward`` [B]
+    for the root (option 0), a template's F_o (``satisfied`` [B, O] while ``on`` the stack
+    before the pops) for the others, plus ``shaping`` [B, O] (a template's side cost,
+    zero where the template is off the stack)."""
+    template = (on & satisfied).astype(jnp.float32)
+    root = jnp.arange(on.shape[-1]) == 0
+    return jnp.where(root[None, :], reward.astype(jnp.float32)[:, None], template) + shaping
+
+
+def option_ends(on_before: jax.Array, on_after: jax.Array, reset: jax.Array) -> jax.Array:
+    """bool [B, O]: each option's run ended in this tick: it was on the stack before the
+    pops and is not after them, or the environment starts a new episode (``reset`` [B])."""
+    return (on_before & ~on_after) | reset[:, None]
+
+
+def option_transitions(obs: jax.Array, acts: ActOutput, masks: jax.Array, chose: jax.Array,
+                       learned: jax.Array, reward: jax.Array, discount: jax.Array,
+                       done: jax.Array) -> Transition:
+    """The tick's joint record: ``acts`` are every option's [O, B] (its own ``act``),
+    ``masks`` [B, O, A], ``chose`` [B, O] (options that chose in this tick), ``learned``
+    [O] (options that learn), ``reward`` and ``done`` [B, O] (``option_rewards``,
+    ``option_ends``), ``obs`` [B, ...] and ``discount`` [B] shared."""
+    return Transition(
+        obs=obs, action=acts.action.T.astype(jnp.int32), action_mask=masks,
+        log_prob=acts.log_prob.T, value=acts.value.T, decision=chose & learned[None, :],
+        reward=reward, discount=discount, done=done)
+
+
+def every_option_acts(agent, learners, obs: jax.Array, masks: jax.Array,
+                      key: jax.Array) -> ActOutput:
+    """Every option's exploring choice [O, B] from its own learner (``learners``: leading
+    axis O; ``masks`` [B, O, A]), each with its own key."""
+    keys = jax.random.split(key, masks.shape[1])
+    return jax.vmap(agent.act, (0, None, 1, 0))(learners, obs, masks, keys)
