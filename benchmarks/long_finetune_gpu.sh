@@ -3,7 +3,8 @@
 # them, a later call on the same warm machine resumes them from their checkpoints.
 #   bash benchmarks/long_finetune_gpu.sh "NAME TASK [train flags...]" ...
 # T (default 540) seconds per call; RESUME=1 to continue. Each run's results.json lands
-# in $OUT as NAME.json once finished, its log as log_NAME.txt (appended per call).
+# in $OUT as NAME.json (its curves as NAME.csv) once finished, its log as log_NAME.txt
+# (appended per call).
 set -u
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/runs
 export XLA_PYTHON_CLIENT_MEM_FRACTION=${XLA_PYTHON_CLIENT_MEM_FRACTION:-$(python3 -c "print(round(0.9 / $#, 3))")}
@@ -14,7 +15,8 @@ for spec in "$@"; do
   ( SMJAX_CACHE_DIR=/tmp/cache_$name timeout "${T:-540}" python3 -m smjax train "$task" \
       --seeds "${SEEDS:-10}" --out "/tmp/runs/$name" --quiet "${again[@]}" "$@" >> "/tmp/runs/log_$name.txt" 2>&1
     echo "$name rc=$?"; cp "/tmp/runs/log_$name.txt" "$OUT/" 2>/dev/null
-    cp "/tmp/runs/$name/results.json" "$OUT/$name.json" 2>/dev/null ) &
+    cp "/tmp/runs/$name/results.json" "$OUT/$name.json" 2>/dev/null
+    cp "/tmp/runs/$name/curves.csv" "$OUT/$name.csv" 2>/dev/null ) &
   pids+=($!)
 done
 for p in "${pids[@]}"; do wait "$p"; done

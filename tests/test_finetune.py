@@ -20,7 +20,7 @@ from smjax.train.seed_arrays import freeze
 
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
            success_window=64, gate_envs=64, eval_envs=64, finetune_max_episodes=1500,
-           finetune_turn_episodes=500)
+           finetune_turn_episodes=500, finetune_mode="turns")  # (joint: tests/test_joint.py)
 
 
 class FarTeleport(KeyDoor):
@@ -97,7 +97,7 @@ def test_finetune_off_and_bad_values():
             TrainConfig(**{field: value})
 
 
-SMALL = dict(num_envs=8, rollout_ticks=8, updates_per_chunk=2, success_window=32, gate_envs=16,
+SMALL = dict(finetune_mode="turns", num_envs=8, rollout_ticks=8, updates_per_chunk=2, success_window=32, gate_envs=16,
              eval_envs=16, max_episodes_per_level=150, finetune_max_episodes=240,
              finetune_turn_episodes=80)
 

@@ -98,6 +98,8 @@ class FinetunePhase:
         """Count seed ``s``'s fine-tuning chunk (``task``: the task window's, per update);
         True if its teleport-free task success over the window reached the threshold."""
         cfg, rec, seed = self.cfg, self.state.finetune[s], self.seeds[s]
+        for success, episodes in zip(stats.task_success[s], stats.task_episodes[s]):
+            rec.add_to_block(success, episodes, cfg.finetune_plateau_episodes)
         rows = rec.count(stats.env_episodes[s], task[0][s], task[1][s],
                          cfg.num_envs * cfg.rollout_ticks)
         for episodes, env_steps, running in rows:
@@ -149,10 +151,13 @@ class FinetunePhase:
         for s in self._training():
             if not self._finetuning(s):
                 continue
-            running = st.level[s].running
-            if s in passed or self._phase_spent(s):
+            running, rec = st.level[s].running, st.finetune[s]
+            plateau = (cfg.finetune_plateau_episodes > 0
+                       and rec.plateaued(cfg.finetune_plateau_gain))
+            if s in passed or self._phase_spent(s) or plateau:
                 phase.append(s)
-                st.finetune[s].reached = s in passed
+                rec.reached = s in passed
+                rec.stop = "gate" if s in passed else "plateau" if plateau else "budget"
             elif not self.joint and (
                     (running is not None and running >= cfg.finetune_option_threshold)
                     or st.level[s].episodes >= cfg.finetune_turn_episodes):

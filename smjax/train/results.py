@@ -119,7 +119,9 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
 
 def _finetune_summary(record: dict | None, config: dict) -> dict | None:
     """results.json's "finetune": per seed, the phase's training episodes and env steps,
-    its gate env steps, whether its gate passed, final_success before it, its turns; where
+    its gate env steps, whether its gate passed, why it ended (``stop``: "gate",
+    "plateau" or "budget"), its mode (``mode``: "joint" or "turns"), the mean task success
+    of its plateau blocks, final_success before it, its turns (joint: one); where
     no gate passed, the fine-tuned hierarchy's check (``check_success``) and which one the
     phase handed back (``kept``: "fine-tuned" or "levels", the better of the two;
     ``baseline`` False: the levels' bank was lost to a resume from an older checkpoint)."""
@@ -127,6 +129,9 @@ def _finetune_summary(record: dict | None, config: dict) -> dict | None:
         return None
     return {
         "threshold": config.get("finetune_threshold"),
+        "mode": config.get("finetune_mode", "turns"),
+        "stop": list(record.get("stop", [None] * len(record["episodes"]))),
+        "block_means": [list(b) for b in record.get("block_means", [[]] * len(record["episodes"]))],
         "episodes": list(record["episodes"]),
         "env_steps": list(record["env_steps"]),
         "gate_env_steps": list(record["gate_env_steps"]),

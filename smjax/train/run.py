@@ -44,7 +44,8 @@ def run_identity(task_name: str, cfg: TrainConfig, seeds: list[int], env_overrid
 
 # new config fields whose default is not what the versions before them did: a checkpoint
 # without the field ran as this says (a resume at the new default is refused, by name)
-LEGACY_VALUES = {"finetune_continue_episodes": False}
+LEGACY_VALUES = {"finetune_continue_episodes": False, "finetune_mode": "turns",
+                 "finetune_plateau_episodes": 0}
 
 
 def check_resumable(out_dir, identity: dict) -> bool:

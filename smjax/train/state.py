@@ -210,6 +210,13 @@ class FinetuneCounters(_Counters):
     check_success: float | None = None
     kept: str | None = None
     baseline: bool = False
+    # the plateau stop (TrainConfig.finetune_plateau_episodes): the task success of
+    # whole-task episodes summed over the block in progress, its episodes, and the mean of
+    # every finished block; why the phase ended ("gate", "plateau" or "budget")
+    block_success: float = 0.0
+    block_episodes: int = 0
+    block_means: list = field(default_factory=list)
+    stop: str | None = None
 
     def count(self, episodes, totals, seen, steps_per_update: int
               ) -> list[tuple[int, int, float | None]]:
@@ -218,6 +225,22 @@ class FinetuneCounters(_Counters):
         rows = self._count(episodes, totals, seen, steps_per_update)
         self.task_running = rows[-1][2] if rows else self.task_running
         return rows
+
+    def add_to_block(self, success: float, episodes: int, size: int) -> None:
+        """Add an update's whole-task episodes (``success``: their summed task success) to
+        the block in progress; a block of at least ``size`` episodes is closed (its mean
+        appended to ``block_means``) and the next one starts."""
+        self.block_success += float(success)
+        self.block_episodes += int(episodes)
+        if size and self.block_episodes >= size:
+            self.block_means.append(self.block_success / self.block_episodes)
+            self.block_success, self.block_episodes = 0.0, 0
+
+    def plateaued(self, gain: float) -> bool:
+        """The last finished block's mean task success is less than ``gain`` above the one
+        before it."""
+        means = self.block_means
+        return len(means) >= 2 and means[-1] - means[-2] < gain
 
 
 LEVEL_KEYS = tuple(f.name for f in dataclasses.fields(LevelCounters))
