@@ -8,21 +8,29 @@ teleport lands in a different distribution of states. After the levels, fine-tun
 the learned hierarchy alone (no teleports; scripted leaf controllers still run, as in
 evaluation) in whole-task episodes, and lets its options learn there.
 
-One option learns at a time, in turns, top-down and then round again: the option's
-learner is warm-started from its frozen policy (``Agent.warm_start``) and trains on its
-own decisions with its own reward (the root: the environment's; a template: its F_o),
-in the states the learned hierarchy actually calls it from, while the other options act
-frozen. Turns reuse the levels' compiled chunk (the option, teleports and episode
-continuation are traced per seed), so fine-tuning compiles nothing new and an update
-costs what a level's does. A turn ends once its option's running success reaches
-``finetune_option_threshold`` or after ``finetune_turn_episodes``; its policy then goes
-back into the bank, and the next turn's learner takes over the same episodes in flight
-(``TrainConfig.finetune_continue_episodes``). An option whose turn ended at that threshold
-is converged: it rests (its next turns go to the others) for up to ``finetune_max_rest``
-turns in a row (default 0: never). Whole-task episodes end by themselves in every turn, so the task's
-teleport-free running success is known after every update: once it reaches
-``finetune_threshold`` a gate (fresh episodes of the hierarchy with the learner frozen
-in, no teleports) decides, and the phase ends when it passes or after
+How the options learn (``TrainConfig.finetune_mode``):
+
+* joint (the default): every learned option learns at once, from every episode. Each has
+  its own learner (``TrainArrays.joint``: [S, O, ...], warm-started from the bank), explores
+  through its ``act``, and trains on its own record of every tick (``smjax.options.joint``)
+  in ``Engine.joint_chunk``, its own compiled program. Seeds still at a level run the level
+  chunk in the same loop iteration; each seed runs in one of the two.
+* turns: one option learns at a time, top-down and then round again, warm-started from
+  its frozen policy (``Agent.warm_start``), while the other options act frozen. Turns reuse
+  the levels' compiled chunk (the option, teleports and episode continuation are traced per
+  seed). A turn ends once its option's running success reaches
+  ``finetune_option_threshold`` or after ``finetune_turn_episodes``; its policy then goes
+  back into the bank, and the next turn's learner takes over the same episodes in flight
+  (``TrainConfig.finetune_continue_episodes``). An option whose turn ended at that
+  threshold rests for up to ``finetune_max_rest`` turns in a row (default 0: never).
+
+Either way each option trains on its own decisions with its own reward (the root: the
+environment's; a template: its F_o), in the states the learned hierarchy calls it from.
+Whole-task episodes end by themselves, so the task's teleport-free running success is known
+after every update: once it reaches ``finetune_threshold`` a gate (fresh episodes of the
+hierarchy with the learners frozen in, no teleports) decides. The phase ends when the gate
+passes, when the task success stops climbing (blocks of ``finetune_plateau_episodes``
+whole-task episodes whose means rise by less than ``finetune_plateau_gain``), or after
 ``finetune_max_episodes``.
 
 Where no gate passed, the phase hands back the better of two hierarchies: the fine-tuned
