@@ -80,7 +80,9 @@ def test_results_contract(top_down_run):
                 b"/learner/kl_stopped", b"seed_0/level_1_open_door/running_success"):
         assert tag in written, tag
     assert res["finetune"] is not None  # top-down fine-tunes by default
-    assert b"seed_0/finetune/give_key/learner/value_loss" in written
+    # (joint, the default: every learned option under finetune/joint/NAME)
+    for name in (b"open_door", b"give_key"):
+        assert b"seed_0/finetune/joint/" + name + b"/learner/value_loss" in written
     # episodes to threshold are the per-level episodes summed, as the paper counts
     for s in range(2):
         assert on_disk["episodes_to_threshold"][s] == sum(l["episodes"][s] for l in on_disk["levels"])
