@@ -222,14 +222,15 @@ class FinetunePhase:
             raise NonFiniteError(f"non-finite learner parameters in chunk {self.state.chunks} "
                                  f"(joint fine-tuning of seeds {[self.seeds[s] for s in seeds]})")
         self.arrays = a.replace(joint=state, window=window, task_window=task_window)
-        if self._tb is not None:
-            self._log_joint(dist.gather(metrics), seeds)
+        if self.cfg.tensorboard:  # collectives: every process gathers, process 0 writes
+            self._log_joint(dist.gather(metrics), np.asarray(dist.gather(a.learned)), seeds)
         return stats, windows
 
-    def _log_joint(self, metrics: dict, seeds: list[int]) -> None:
+    def _log_joint(self, metrics: dict, learned: np.ndarray, seeds: list[int]) -> None:
         """TensorBoard: each learned option's learner metrics ([S, U, O]: the mean over the
         chunk's updates) under ``seed_S/finetune/joint/NAME/learner/``."""
-        learned = np.asarray(dist.gather(self.arrays.learned))
+        if self._tb is None:
+            return
         for s in seeds:
             for o, name in enumerate(self.engine.h.option_names):
                 if not learned[s, o]:

@@ -59,7 +59,8 @@ class HierarchyTrainer(ft.FinetunePhase):
         self.joint = bool(self.ft_order) and self.cfg.finetune_mode == "joint"
         if self.joint and engine.agent.hidden_size:
             raise ConfigError("config field 'finetune_mode' = 'joint' does not run a recurrent "
-                              "policy (--agent recurrent_size): use finetune_mode 'turns'")
+                              "policy (--agent recurrent_size): add --finetune-mode turns "
+                              "(finetune_mode: turns)")
         self.num_stages = len(plans) + bool(self.ft_order)
         self.out_dir = out_dir
         self.writer = dist.is_writer()  # process 0: the only one that writes files or draws bars
