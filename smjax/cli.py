@@ -81,8 +81,8 @@ def _add_train(sub):
                         "its task success passes --set finetune_threshold (0.92) (default auto: on "
                         "for top-down; docs/guide.md, 'Fine-tuning')")
     p.add_argument("--finetune-mode", choices=("turns", "joint"), default=None,
-                   help="how fine-tuning trains the learned options: one at a time in turns "
-                        "(default), or all at once from every episode (joint)")
+                   help="how fine-tuning trains the learned options: all at once from every "
+                        "episode (joint, the default), or one at a time in turns")
     p.add_argument("--finetune-episodes", type=int, default=None, metavar="N",
                    help="fine-tuning's episode budget per seed (default 20000)")
     p.add_argument("--fixed-map", action="store_true", help="Craft: one fixed map per run (the paper's setting)")

@@ -28,17 +28,11 @@ import jax
 import jax.numpy as jnp
 
 from smjax.core.transition import ActOutput, Transition
-from smjax.options.stack import ExecutionStack, stack_members
 
 # a rollout's joint record [T, B, O]: which axis of each field is the option axis (None:
 # shared by every option), for ``jax.vmap(update, in_axes=(0, ..., OPTION_AXES, ...))``
 OPTION_AXES = Transition(obs=None, action=2, action_mask=2, log_prob=2, value=2, decision=2,
                          reward=2, discount=None, done=2, hidden=None)
-
-
-def options_on(stack: ExecutionStack, num_options: int) -> jax.Array:
-    """bool [B, O]: the options on each environment's stack."""
-    return jax.vmap(lambda st: stack_members(st, num_options))(stack)
 
 
 def option_rewards(reward: jax.Array, satisfied: jax.Array, on: jax.Array,

@@ -36,7 +36,7 @@ from smjax.options.carry import (  # noqa: F401 - re-exported: the runner's publ
 from smjax.options.hierarchy import Hierarchy, check_success
 from smjax.options.memory import make_memory
 from smjax.options.realise import families, primitive_action, run_family
-from smjax.options.stack import stack_init, stack_members
+from smjax.options.stack import options_on, stack_init
 
 _NEVER = np.iinfo(np.int32).max // 2
 
@@ -243,7 +243,7 @@ class HierarchyRunner(PolicyBank):
         gamma = self.gamma if controls.gamma is None else controls.gamma
         discount = phases.tick_discount(teleported, self.nominal, gamma)
         learner_idx = jnp.maximum(controls.learner, 0)
-        on = joint.options_on(decision.stack, self.h.num_options)  # before the pops
+        on = options_on(decision.stack, self.h.num_options)  # before the pops
         shaping = self._side_costs(carry.env_state, state, discount, on, controls)
         acc = phases.account(
             started=carry.learner_started, learner_return=carry.learner_return,
@@ -258,7 +258,7 @@ class HierarchyRunner(PolicyBank):
             transition = joint.option_transitions(
                 carry.obs, act, learner_mask, decision.chose, controls.learned,
                 joint.option_rewards(reward, sat, on, shaping), discount,
-                joint.option_ends(on, joint.options_on(popped.stack, self.h.num_options),
+                joint.option_ends(on, options_on(popped.stack, self.h.num_options),
                                   acc.reset))
         else:
             transition = Transition(
@@ -279,7 +279,7 @@ class HierarchyRunner(PolicyBank):
         (``memory``: every option's memory after choosing now), zero where it is no longer
         on the stack or its episode was reset, so each run of an option starts from zero."""
         hidden = jnp.where(chose[..., None], memory, carry.hidden)
-        on = jax.vmap(lambda st: stack_members(st, self.h.num_options))(carry.stack)
+        on = options_on(carry.stack, self.h.num_options)
         return jnp.where((on & ~reset[:, None])[..., None], hidden, 0.0)
 
     def _choices(self, carry: EnvCarry, learner_state, bank_params, controls: Controls,

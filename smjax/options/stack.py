@@ -75,3 +75,8 @@ def stack_members(stack: ExecutionStack, num_options: int) -> jax.Array:
     """bool [num_options]: the options on the stack."""
     live = jnp.arange(stack.capacity) < stack.depth
     return jnp.any(live[:, None] & (stack.option[:, None] == jnp.arange(num_options)), axis=0)
+
+
+def options_on(stack: ExecutionStack, num_options: int) -> jax.Array:
+    """bool [B, num_options]: the options on each stack of a batch (leading axis B)."""
+    return jax.vmap(lambda st: stack_members(st, num_options))(stack)

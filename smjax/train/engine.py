@@ -200,23 +200,23 @@ class Engine:
                             gamma=gamma, acts_frozen=True, joint=True)
         return self._updates(state, active, controls, None, self._learn_joint, windows, sizes)
 
-    def _learn(self, learner, carry: EnvCarry, traj, key):
-        """One learner's update on a rollout (its pending decisions carried over)."""
-        # Decisions whose option still runs train in the next rollout, once complete.
-        traj, pending = carry_pending(carry.pending, traj)
+    def _update(self, learner, pending, traj, key):
+        """One learner's update on a rollout; (learner, its new pending decisions, metrics).
+        Decisions whose option still runs train in the next rollout, once complete."""
+        traj, pending = carry_pending(pending, traj)
         learner, metrics = self.agent.update(learner, traj, key)
+        return learner, pending, metrics
+
+    def _learn(self, learner, carry: EnvCarry, traj, key):
+        """The learner's update on a rollout (its pending decisions carried over)."""
+        learner, pending, metrics = self._update(learner, carry.pending, traj, key)
         return learner, carry.replace(pending=pending), metrics
 
     def _learn_joint(self, learners, carry: EnvCarry, traj, key):
         """Every option's update on its own rows of the rollout (``OPTION_AXES``), each
         with its own pending decisions (``carry.pending``: leading axis O)."""
-        def one(learner, pending, rows, k):
-            rows, pending = carry_pending(pending, rows)
-            learner, metrics = self.agent.update(learner, rows, k)
-            return learner, pending, metrics
-
         keys = jax.random.split(key, self.h.num_options)
-        learners, pending, metrics = jax.vmap(one, (0, 0, OPTION_AXES, 0))(
+        learners, pending, metrics = jax.vmap(self._update, (0, 0, OPTION_AXES, 0))(
             learners, carry.pending, traj, keys)
         return learners, carry.replace(pending=pending), metrics
 

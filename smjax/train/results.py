@@ -130,8 +130,8 @@ def _finetune_summary(record: dict | None, config: dict) -> dict | None:
     return {
         "threshold": config.get("finetune_threshold"),
         "mode": config.get("finetune_mode", "turns"),
-        "stop": list(record.get("stop", [None] * len(record["episodes"]))),
-        "block_means": [list(b) for b in record.get("block_means", [[]] * len(record["episodes"]))],
+        "stop": list(record["stop"]),
+        "block_means": [list(b) for b in record["block_means"]],
         "episodes": list(record["episodes"]),
         "env_steps": list(record["env_steps"]),
         "gate_env_steps": list(record["gate_env_steps"]),
