@@ -185,7 +185,7 @@ def account(*, started: jax.Array, learner_return: jax.Array, task_return: jax.A
     # Success of a finished episode: the template's F_o (its return) for a template
     # learner; for the root, the task's success where there is one (the hierarchy's
     # declared success, else the environment's info["success"], e.g. Fetch's fraction of
-    # blocks placed: HierarchyRunner.task_success), else the episode return.
+    # blocks placed: template_fields.task_success), else the episode return.
     if info_success is not None:
         task_success = jnp.asarray(info_success, jnp.float32)
         success = jnp.where(is_root, task_success, ep_return)

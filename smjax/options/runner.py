@@ -15,8 +15,10 @@ is the environment's reward when it is the root option, else ``satisfied`` of it
 template (F_o); the per-tick discount is gamma, or gamma**d for a teleported call; the
 learner's episode (``done``) ends with the environment's or when its option ends.
 The tick is a string of pure phases (``smjax.options.phases``: decide, realise, step,
-pop, account). The machinery is generic: it sees the environment only through ``reset_env``,
-``step_env`` and the templates of a :class:`~smjax.options.Hierarchy`.
+pop, account); what the templates say about states (satisfied, failed, side costs, the
+task's success) comes from ``smjax.options.template_fields``. The machinery is generic:
+it sees the environment only through ``reset_env``, ``step_env`` and the templates of a
+:class:`~smjax.options.Hierarchy`.
 """
 from __future__ import annotations
 
@@ -26,7 +28,7 @@ import numpy as np
 
 from smjax.core.env import select_tree
 from smjax.core.transition import ActOutput, Transition, no_pending
-from smjax.options import joint, phases
+from smjax.options import joint, phases, template_fields
 from smjax.options.bank import (  # noqa: F401 - re-exported
     FROZEN_EVALS, PolicyBank, option_temperatures,
 )
@@ -104,25 +106,10 @@ class HierarchyRunner(PolicyBank):
         # a recurrent learner's memory width (0: memoryless policies, no memory carried)
         self.memory_size = 0 if agent is None else int(agent.hidden_size)
 
-    # ---- per-environment template evaluations (unbatched) ------------------
-    def _per_option(self, state, field: str, root, dtype) -> jax.Array:
-        """[O]: ``root`` for the root option, then each template's ``field`` on ``state``
-        (``root`` too where a template leaves that optional field unset)."""
-        fns = [getattr(t, field) for t in self.templates]
-        vals = [root] + [root if fn is None else fn(state, self.env_params) for fn in fns]
-        return jnp.stack([jnp.asarray(v, dtype).reshape(()) for v in vals])
-
-    def _satisfied(self, state) -> jax.Array:
-        return self._per_option(state, "satisfied", False, bool)
-
-    def _side_cost(self, state) -> jax.Array:
-        return self._per_option(state, "side_cost", 0.0, jnp.float32)
-
-    def _failed(self, state) -> jax.Array:
-        return self._per_option(state, "failed", False, bool)
-
     def _initiation(self, state) -> jax.Array:
-        return self._per_option(state, "initiation", True, bool)
+        """bool [O]: which options may start in ``state`` (one environment)."""
+        return template_fields.per_option(self.templates, self.env_params, state,
+                                          "initiation", True, bool)
 
     def teleports_on(self, controls: Controls) -> jax.Array:
         """bool: unlearned templates with a teleport jump (else they are not callable)."""
@@ -237,21 +224,23 @@ class HierarchyRunner(PolicyBank):
             self.env, self.env_params, k_step, state_in, action)
         if self.memory is not None:
             obs = self.memory.after(carry.obs, obs, action)
-        sat, stop = self._stop(state)
+        sat, stop = template_fields.stop_conditions(self.templates, self.env_params, state)
         popped = phases.pop(decision.stack, stop, self.k_max, controls.learner)
 
         gamma = self.gamma if controls.gamma is None else controls.gamma
         discount = phases.tick_discount(teleported, self.nominal, gamma)
         learner_idx = jnp.maximum(controls.learner, 0)
         on = options_on(decision.stack, self.h.num_options)  # before the pops
-        shaping = self._side_costs(carry.env_state, state, discount, on, controls)
+        shaping = template_fields.side_costs(self.templates, self.env_params, carry.env_state,
+                                             state, discount, on, controls.side_cost)
         acc = phases.account(
             started=carry.learner_started, learner_return=carry.learner_return,
             task_return=carry.task_return, decided=decision.learner_decided, reward=reward,
             env_done=terminated | truncated, popped=popped,
             learner_satisfied=sat[:, learner_idx],
             shaping=shaping if isinstance(shaping, float) else shaping[:, learner_idx],
-            info_success=self.task_success(state, info),
+            info_success=template_fields.task_success(self.h.success, self.env_params, state,
+                                                      info),
             learner=controls.learner, start=controls.start,
             reset_on_learner_end=self.resets_on_learner_end(controls))
         if controls.joint:  # every option's own record (joint.py)
@@ -368,13 +357,6 @@ class HierarchyRunner(PolicyBank):
                                                  teleported, action, controls=False)
         return env_state, action, teleported
 
-    def _stop(self, state) -> tuple[jax.Array, jax.Array]:
-        """(satisfied, satisfied or failed), both [B, O], in the stepped state."""
-        sat = jax.vmap(self._satisfied)(state)
-        if any(t.failed is not None for t in self.templates):
-            return sat, sat | jax.vmap(self._failed)(state)
-        return sat, sat
-
     def _restart(self, carry: EnvCarry, acc: phases.Accounts, stack, obs, state,
                  controls: Controls, key: jax.Array) -> EnvCarry:
         """The next tick's carry: where an episode ended, a new start with a fresh stack."""
@@ -391,32 +373,6 @@ class HierarchyRunner(PolicyBank):
             pool=pool,
             hidden=carry.hidden,  # the tick's memory update follows (``_next_memory``)
         )
-
-    def task_success(self, state, info: dict) -> jax.Array | None:
-        """[B] float: the root's success of episodes ending in ``state`` (batched): the
-        hierarchy's declared ``success(state, params)``, else the environment's
-        ``info["success"]`` (e.g. Fetch's fraction of blocks placed); None where neither
-        exists (the episode return is the success then)."""
-        if self.h.success is not None:
-            value = jax.vmap(self.h.success, (0, None))(state, self.env_params)
-            return jnp.asarray(value, jnp.float32).reshape(-1)  # scalar or [1] per state
-        if "success" in info:
-            return jnp.asarray(info["success"], jnp.float32)
-        return None
-
-    def _side_costs(self, before, after, discount, on, controls: Controls):
-        """Every template's extra reward [B, O] ``c(s) - discount * c(s')`` for its
-        ``side_cost`` c, times the weight ``controls.side_cost``, where it is ``on`` the
-        stack (0 for the root, and 0.0 altogether where no weight is given or no template
-        has a side cost). Summed over an option's run it telescopes to minus the discounted
-        cost it ends with, above what it started with."""
-        if controls.side_cost is None or not any(t.side_cost is not None for t in self.templates):
-            return 0.0
-        c0 = jax.vmap(self._side_cost)(before)
-        c1 = jax.vmap(self._side_cost)(after)
-        weight = jnp.asarray(controls.side_cost, jnp.float32)
-        template = (jnp.arange(self.h.num_options) > 0)[None, :]
-        return jnp.where(on & template, weight * (c0 - discount[:, None] * c1), 0.0)
 
     def resets_on_learner_end(self, controls: Controls) -> jax.Array | bool:
         """Whether an environment is reset when the learner's option ends."""

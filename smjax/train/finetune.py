@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.train import distributed as dist
+from smjax.train.config import ConfigError
 from smjax.train.seed_arrays import (
     NonFiniteError, all_finite, fold_in, freeze, local, select_seeds,
 )
@@ -101,6 +102,15 @@ class FinetunePhase:
     def finetune_level(self) -> int:
         """The level number fine-tuning's curve is recorded under (after the last level)."""
         return max(p.level for p in self.plans) + 1
+
+    def _finetune_hp(self, hp: dict) -> dict:
+        """``cfg.finetune_agent`` as the learner's per-slot hyper-parameter leaves."""
+        unknown = sorted(set(self.cfg.finetune_agent) - set(hp))
+        if unknown:
+            raise ConfigError(f"config field 'finetune_agent' names {unknown}, which the "
+                              f"{self.cfg.algo} learner does not read per turn; it reads "
+                              f"{sorted(hp)}")
+        return {k: jnp.full_like(hp[k], v) for k, v in self.cfg.finetune_agent.items()}
 
     def _account_task(self, stats, task, s: int) -> bool:
         """Count seed ``s``'s fine-tuning chunk (``task``: the task window's, per update);

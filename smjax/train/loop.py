@@ -11,6 +11,8 @@ has finished every level is masked). A seed's numbers do not depend on the other
 Everything the loop knows lives in ``arrays`` (device state, ``TrainArrays``, with the
 running-success windows) and ``state`` (host counters, ``TrainerState``; both in
 :mod:`smjax.train.state`): exactly what a checkpoint holds, so a resumed run continues bit for bit.
+The trainer's level steps (counting, budgets, the gate) are mixed in from
+:mod:`smjax.train.levels`, its fine-tuning steps from :mod:`smjax.train.finetune`.
 """
 from __future__ import annotations
 
@@ -24,11 +26,12 @@ import numpy as np
 from smjax.train import checkpoint as ckpt
 from smjax.train import finetune as ft
 from smjax.train.seed_arrays import (  # noqa: F401 - NonFiniteError re-exported
-    NonFiniteError, all_finite, fold_in, freeze, local, select_seeds, split_seeds,
+    NonFiniteError, all_finite, local, select_seeds, split_seeds,
 )
 from smjax.train import distributed as dist
 from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig
 from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
+from smjax.train.levels import LevelPhase
 from smjax.train.plans import LevelPlan, plan_levels
 from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
@@ -40,7 +43,7 @@ from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 CHECKPOINT_FORMAT = 4
 
 
-class HierarchyTrainer(ft.FinetunePhase):
+class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
     """Trains every planned level for all seeds, each seed at its own pace; resumable."""
 
     def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
@@ -348,15 +351,6 @@ class HierarchyTrainer(ft.FinetunePhase):
         for s in seeds:
             self.state.start(s)
 
-    def _finetune_hp(self, hp: dict) -> dict:
-        """``cfg.finetune_agent`` as the learner's per-slot hyper-parameter leaves."""
-        unknown = sorted(set(self.cfg.finetune_agent) - set(hp))
-        if unknown:
-            raise ConfigError(f"config field 'finetune_agent' names {unknown}, which the "
-                              f"{self.cfg.algo} learner does not read per turn; it reads "
-                              f"{sorted(hp)}")
-        return {k: jnp.full_like(hp[k], v) for k, v in self.cfg.finetune_agent.items()}
-
     def _init_learner(self, keys: jax.Array):
         """Fresh learners per slot, with each slot's swept hyper-parameters."""
         learner = self.engine.init_learner(keys)
@@ -368,82 +362,3 @@ class HierarchyTrainer(ft.FinetunePhase):
         due = time.perf_counter() - self._last_save >= self.cfg.checkpoint_every
         # clocks differ between processes, and saving is collective: process 0 decides
         return dist.agree(due) if self.cfg.checkpoint_every > 0 else due
-
-    def _account(self, stats, windows) -> tuple[list[int], list[int]]:
-        """Count a chunk's episodes, steps and windows (learner's, task's: ``Engine._chunk``);
-        record the curves; the seeds whose running success reached the threshold (levels), and
-        the fine-tuning seeds whose task success reached theirs."""
-        task_candidates = [s for s in self._training() if self._finetuning(s)
-                           and self._account_task(stats, windows[1], s)]
-        candidates = []
-        steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
-        for s in self._training():
-            plan, cfg, seed, c = self._plan(s), self._level_cfg(s), self.seeds[s], self.state.level[s]
-            rows = c.count(stats.env_episodes[s], *(x[s] for x in windows[0]), steps_per_update)
-            for episodes, env_steps, running in rows:
-                if not self._finetuning(s):  # (fine-tuning records the task's curve)
-                    self.state.curves.append([seed, plan.level, plan.name, episodes, env_steps,
-                                              running, s])
-                if self._tb is not None and running is not None:
-                    tag = self._tb_level_tag(s)
-                    self._tb.add_scalar(f"{tag}/running_success", running, env_steps)
-                    self._tb.add_scalar(f"{tag}/episodes", episodes, env_steps)
-            if (c.running is not None and c.running >= cfg.threshold
-                    and not self._finetuning(s)):
-                candidates.append(s)
-        return candidates, task_candidates
-
-    def _budget_spent(self, cfg: TrainConfig, s: int) -> bool:
-        c = self.state.level[s]
-        return c.episodes >= cfg.max_episodes_per_level or bool(
-            cfg.max_steps_per_level and c.env_steps >= cfg.max_steps_per_level)
-
-    def _accept(self, candidates: list[int]) -> list[int]:
-        """Seeds (of ``candidates``, whose running success reached the threshold) whose
-        level ends now: all of them without the gate; with it, those whose frozen policy
-        passes a gate attempt (tried every ``gate_interval`` chunks, and once more when
-        the budget is spent)."""
-        st, a = self.state, self.arrays
-        if not self.cfg.gate or not candidates:
-            return candidates
-        due = [s for s in candidates if st.chunks >= st.level[s].gate_next
-               or self._budget_spent(self._level_cfg(s), s)]
-        if not due:
-            return []
-        S = len(self.seeds)
-        # the attempt number varies the gate's episodes between attempts, deterministically
-        keys = fold_in(a.keys, jnp.asarray(st.chunks, jnp.uint32))
-        plans = [self._plan(s) for s in range(S)]
-        # one vmapped call for all seeds; those not due are skipped (their results unused)
-        result, compile_s = self.engine.gate(
-            keys, a.state, a.bank, a.learned, [p.option for p in plans],
-            [p.start for p in plans], [s in due for s in range(S)],
-            [self._level_cfg(s).threshold for s in range(S)], place=self._place_small)
-        st.compile_seconds += compile_s
-        result = dist.gather(result)
-        passed = []
-        for s in due:
-            c, cfg = st.level[s], self._level_cfg(s)
-            success = c.record_gate(result, s, st.chunks + cfg.gate_interval)
-            if self._tb is not None:
-                self._tb.add_scalar(f"{self._tb_level_tag(s)}/gate_success", success, c.env_steps)
-            if success >= cfg.threshold:
-                passed.append(s)
-        return passed
-
-    def _freeze_learners(self, seeds: list[int]) -> None:
-        """Store these seeds' learner params in their banks at the option they train."""
-        a = jax.tree.map(local, self.arrays)
-        bank, learned = freeze(self._mask(seeds), self._options(), a.state.learner.params,
-                               a.bank, a.learned)
-        self.arrays = a.replace(bank=bank, learned=learned)
-        self._place()
-
-    def _finish_levels(self, seeds: list[int]) -> None:
-        """Freeze these seeds' learners into the bank and record their levels."""
-        if not seeds:
-            return
-        self._freeze_learners(seeds)
-        for s in seeds:
-            self.state.finish_level(s)
-        self._evaluate_before([s for s in seeds if self._finetuning(s)])
