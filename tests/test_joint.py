@@ -182,6 +182,30 @@ def test_the_phase_stops_on_a_plateau():
     assert 120 <= ft["episodes"][0] < 5000
 
 
+def test_a_hierarchy_that_passes_before_the_phase_is_not_fine_tuned(monkeypatch):
+    # the evaluation before the phase is its first gate: at a threshold the levels'
+    # hierarchy already passes (KeyDoor's SMALL levels leave it at ~0.3-0.4), no episode is
+    # fine-tuned and the levels' bank is handed back untouched
+    from smjax.train.finetune import FinetunePhase
+
+    banks, real = [], FinetunePhase._evaluate_before
+    monkeypatch.setattr(FinetunePhase, "_evaluate_before", lambda self, seeds: (
+        real(self, seeds), seeds and banks.append(jax.tree.map(np.asarray, self.arrays.bank))))
+    res = run(make_keydoor(), TrainConfig(**(JOINT_SMALL | {"finetune_threshold": 0.05})),
+              [0, 1], progress=False)
+    ft = res["finetune"]
+    assert ft["episodes"] == [0, 0] and ft["env_steps"] == [0, 0] and ft["turns"] == [[], []]
+    assert ft["stop"] == ["gate"] * 2 and ft["reached"] == [True] * 2
+    assert ft["kept"] == ["levels"] * 2 and ft["gate_attempts"] == [1, 1]
+    assert ft["gate_success"] == ft["final_success_before"]
+    assert min(ft["final_success_before"]) >= 0.05 and min(ft["gate_env_steps"]) > 0
+    levels = [sum(rec["episodes"][s] for rec in res["levels"]) for s in range(2)]
+    assert res["total_episodes"] == levels
+    # (the seeds may end their levels in different chunks: the last bank holds both)
+    assert banks and all(jax.tree.leaves(jax.tree.map(
+        lambda x, y: bool((np.asarray(x) == y).all()), res["_raw"]["bank"], banks[-1])))
+
+
 def test_bad_joint_settings_are_refused():
     for field, value in (("finetune_mode", "both"), ("finetune_plateau_episodes", -1),
                          ("finetune_plateau_episodes", 2.5), ("finetune_plateau_gain", 1.5)):

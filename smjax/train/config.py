@@ -95,7 +95,9 @@ class TrainConfig:
         teleports above and below them). The learned options keep learning, warm-started
         from their frozen policies, in whole-task episodes of the learned hierarchy alone
         (scripted leaf controllers still run), each on its own decisions with its own
-        reward (``finetune_mode`` says whether all at once or in turns). The phase ends
+        reward (``finetune_mode`` says whether all at once or in turns). A seed whose
+        levels' hierarchy already passes the gate at ``finetune_threshold`` (the evaluation
+        before the phase is its first attempt) skips the phase. The phase ends
         when the teleport-free task success passes a gate at ``finetune_threshold``, when
         it stops climbing (``finetune_plateau_episodes``) or after
         ``finetune_max_episodes`` (docs/guide.md, "Fine-tuning").
