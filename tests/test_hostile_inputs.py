@@ -571,8 +571,9 @@ def _watch(latest: Path, stop: threading.Event, misses: list, seen: list) -> Non
 
 def test_latest_never_dangles_and_a_second_run_is_refused(tmp_path, capsys):
     out = tmp_path / "shared"
-    # no gate (one program less to compile), a short budget: saves at every chunk and boundary
-    proc = _start(out, TINY | {"gate": False, "max_episodes_per_level": 120})
+    # no gate and no fine-tuning (two programs less to compile), a short budget: saves at
+    # every chunk and boundary
+    proc = _start(out, TINY | {"gate": False, "max_episodes_per_level": 120, "finetune": "off"})
     latest = out / "checkpoints" / ckpt.LATEST
     stop, misses, seen = threading.Event(), [], []
     watcher = threading.Thread(target=_watch, args=(latest, stop, misses, seen), daemon=True)

@@ -40,11 +40,12 @@ def test_a_level_does_not_end_on_exploration_luck():
     # templates its behaviour policy succeeds in every episode, so the running success
     # passes the threshold at once. Its greedy policy is an untrained network's argmax.
     agent = {"epsilon_start": 1.0, "epsilon_end": 1.0, "learning_starts": 10**9}
-    # (only the root is examined: give_key's level gets a budget of one chunk)
+    # (only the root is examined: give_key's level gets a budget of one chunk, and there
+    # is no fine-tuning after it)
     cfg = TrainConfig(algo="dqn", hierarchy="scripted", num_envs=32, rollout_ticks=16,
                       updates_per_chunk=2, success_window=64, max_episodes_per_level=160,
                       threshold=0.5, gate_envs=64, gate_interval=1, eval_envs=64, agent=agent,
-                      levels={"give_key": {"max_steps_per_level": 1}})
+                      levels={"give_key": {"max_steps_per_level": 1}}, finetune="off")
     root = run(make_keydoor(), cfg, [0, 1, 2], progress=False)["levels"][0]
     assert min(root["final_running_success"]) >= 0.5  # every seed's exploration "passed"
     for s in range(3):
