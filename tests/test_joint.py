@@ -194,8 +194,13 @@ def test_a_hierarchy_that_passes_before_the_phase_is_not_fine_tuned(monkeypatch)
     from smjax.train.finetune import FinetunePhase
 
     banks, real = [], FinetunePhase._evaluate_before
-    monkeypatch.setattr(FinetunePhase, "_evaluate_before", lambda self, seeds: (
-        real(self, seeds), seeds and banks.append(jax.tree.map(np.asarray, self.arrays.bank))))
+
+    def evaluate_before(self, seeds):  # and keep the bank as the levels left it
+        real(self, seeds)
+        if seeds:
+            banks.append(jax.tree.map(np.asarray, self.arrays.bank))
+
+    monkeypatch.setattr(FinetunePhase, "_evaluate_before", evaluate_before)
     res = run(make_keydoor(), TrainConfig(**(JOINT_SMALL | {"finetune_threshold": 0.05})),
               [0, 1], progress=False)
     ft = res["finetune"]

@@ -293,7 +293,7 @@ class FinetunePhase:
         passes ``finetune_threshold`` has nothing to fine-tune, and its phase ends before it
         starts. Fetch stack3's levels score 0.92-0.95 there, and joint DQN fine-tuning took
         two of three such seeds to 0.08 and 0.44 before the better-of-two rule put their
-        levels' banks back, after ~1.1 million env steps each (benchmarks/RESULTS.md
+        levels' banks back, after ~1.2 million env steps each (benchmarks/RESULTS.md
         section 20)."""
         if not self.cfg.gate:
             return
