@@ -244,14 +244,15 @@ class FinetunePhase:
         chunk's updates) under ``seed_S/finetune/joint/NAME/learner/``."""
         if self._tb is None:
             return
+        # once per chunk, as ``_log_learner`` does (not per seed and option)
+        means = {key: np.asarray(value, np.float64) for key, value in metrics.items()}
         for s in seeds:
             for o, name in enumerate(self.engine.h.option_names):
                 if not learned[s, o]:
                     continue
                 tag = f"seed_{self.seeds[s]}/finetune/joint/{name}/learner"
-                for key, value in metrics.items():
-                    value = np.asarray(value, np.float64)
-                    if value.ndim == 3:
+                for key, value in means.items():
+                    if value.ndim == 3:  # [S, U, O]: one scalar per update and option
                         self._tb.add_scalar(f"{tag}/{key}", float(np.mean(value[s, :, o])),
                                             self.state.finetune[s].env_steps)
 
