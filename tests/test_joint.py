@@ -1,4 +1,5 @@
 """Joint fine-tuning: every learned option learns at once, each from its own record."""
+import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,7 +14,10 @@ from smjax.core.transition import ActOutput, Transition
 from smjax.options import joint
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
+from smjax.options.carry import NO_OPTION, Controls
 from smjax.train.engine import Engine
+from smjax.train.loop import HierarchyTrainer
+from smjax.train.plans import plan_levels
 from smjax.train.run import run
 from smjax.train.state import FinetuneCounters, SuccessWindow
 from test_finetune import CFG, SMALL, FarTeleport, _strip_timing, assert_the_teleport_fixed
@@ -54,7 +58,7 @@ def _record(T=6, B=5, O=3, A=4, seed=0):
         value=jax.random.normal(k[2], (T, B, O)),
         decision=jax.random.bernoulli(k[3], 0.5, (T, B, O)),
         reward=jax.random.uniform(k[4], (T, B, O)),
-        discount=jnp.full((T, B), 0.99, jnp.float32),
+        discount=jnp.full((T, B, O), 0.99, jnp.float32),
         done=jax.random.bernoulli(k[5], 0.2, (T, B, O)))
 
 
@@ -63,17 +67,21 @@ def keydoor_engine():
     env, params = make_keydoor()
     h = env.hierarchies()["paper"]
     engine = Engine(env, params, h, make_agent("ppo"), TrainConfig(**JOINT_SMALL))
-    state = engine.joint_state(engine.init_learner(jax.random.PRNGKey(1)[None]),
-                               engine.new_bank(engine.init_learner(jax.random.PRNGKey(2)[None])),
-                               jax.random.PRNGKey(3)[None], jax.random.PRNGKey(4)[None])
-    return engine, state, jax.jit(engine._learn_joint)
+    return engine, _joint_state(engine), jax.jit(engine._learn_joint)
+
+
+def _joint_state(engine):
+    """A fresh joint state for one seed (``joint_chunk`` consumes the one it is given)."""
+    return engine.joint_state(engine.init_learner(jax.random.PRNGKey(1)[None]),
+                              engine.new_bank(engine.init_learner(jax.random.PRNGKey(2)[None])),
+                              jax.random.PRNGKey(3)[None], jax.random.PRNGKey(4)[None])
 
 
 @settings(max_examples=6, deadline=None, phases=[Phase.generate])
 @given(data=st.data(), seed=st.integers(0, 2**16))
 def test_each_option_trains_only_on_its_own_rows(keydoor_engine, data, seed):
     # scrambling one option's columns of the record (its decisions, actions, rewards,
-    # ends) leaves every other option's update exactly as it was
+    # discounts, ends) leaves every other option's update exactly as it was
     engine, state, learn = keydoor_engine
     O, B, A = engine.h.num_options, 5, engine.h.num_actions
     other = data.draw(st.integers(0, O - 1))
@@ -84,9 +92,11 @@ def test_each_option_trains_only_on_its_own_rows(keydoor_engine, data, seed):
     carry = state.carry.replace(pending=pending)  # only the pending rows are read
     scrambled = _record(B=B, O=O, A=A, seed=seed + 1)
     pick = lambda a, b: a.at[:, :, other].set(b[:, :, other])  # noqa: E731
+    scrambled = scrambled._replace(discount=jax.random.uniform(jax.random.PRNGKey(seed),
+                                                               scrambled.discount.shape))
     changed = traj._replace(**{f: pick(getattr(traj, f), getattr(scrambled, f))
                                for f in ("action", "log_prob", "value", "decision", "reward",
-                                         "done")})
+                                         "discount", "done")})
     key = jax.random.PRNGKey(7)
     first, _, _ = learn(learners, carry, traj, key)
     second, _, _ = learn(learners, carry, changed, key)
@@ -117,7 +127,7 @@ def test_an_options_record_is_its_own(data):
     acts = ActOutput(jnp.zeros((O, B), jnp.int32), jnp.zeros((O, B)), jnp.zeros((O, B)))
     tr = joint.option_transitions(jnp.zeros((B, 2)), acts, jnp.ones((B, O, A), bool),
                                   jnp.asarray(chose), jnp.asarray(learned), jnp.asarray(r),
-                                  jnp.ones((B,)), jnp.asarray(done))
+                                  jnp.ones((B, O)), jnp.asarray(done))
     # an option's decisions are its own choices, and only a learned option's
     np.testing.assert_array_equal(np.asarray(tr.decision), chose & learned[None, :])
 
@@ -132,11 +142,47 @@ def test_a_joint_rollout_records_every_learned_option(keydoor_engine):
     windows = (SuccessWindow.empty(1, 32), SuccessWindow.empty(1, 32))
     new, _, metrics, _, _ = engine.joint_chunk(
         state, jnp.ones((1,), bool), learned, jnp.ones((1,), jnp.float32),
-        jnp.full((1,), 0.99, jnp.float32), windows, sizes)
+        jnp.full((1, O), 0.99, jnp.float32), windows, sizes)
     decisions = np.asarray(metrics["decisions"])  # [1, U, O]
     assert decisions.shape == (1, SMALL["updates_per_chunk"], O)
     assert (decisions.sum(1) > 0).all(), decisions  # every option learned from something
     assert jax.tree.leaves(new.learner)[0].shape[:2] == (1, O)
+
+
+def test_each_option_is_discounted_at_its_own_gamma(keydoor_engine):
+    # the joint record's discount is per option: with no teleports in fine-tuning, each
+    # tick's is exactly that option's gamma (a root at 0.99 above options at 0.9 keeps
+    # both horizons, rather than re-fitting the options at the root's)
+    engine, _, _ = keydoor_engine
+    state = _joint_state(engine)
+    O = engine.h.num_options
+    gamma = jnp.linspace(0.99, 0.9, O).astype(jnp.float32)
+    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), jnp.ones((O,), bool),
+                        jnp.asarray(False), jnp.asarray(False), side_cost=jnp.asarray(1.0),
+                        gamma=gamma, acts_frozen=True, joint=True)
+    learners = jax.tree.map(lambda x: x[0], state.learner)
+    carry = jax.tree.map(lambda x: x[0], state.carry)
+    tick = jax.jit(lambda c, k: engine.runner.tick(c, k, learners, None, controls))
+    for t in range(3):
+        carry, record, _ = tick(carry, jax.random.PRNGKey(t))
+        chex.assert_shape(record.discount, (carry.obs.shape[0], O))
+        np.testing.assert_allclose(np.asarray(record.discount),
+                                   np.broadcast_to(np.asarray(gamma), record.discount.shape))
+
+
+def test_joint_finetuning_keeps_each_levels_discount():
+    # TrainConfig.levels' per-level gamma reaches each option in joint fine-tuning (it
+    # used to be the root level's for every option)
+    env, params = make_keydoor()
+    h = env.hierarchies()["paper"]
+    root, *below = plan_levels(h, "top-down")
+    cfg = TrainConfig(**JOINT_SMALL | {"gamma": 0.95, "levels": {root.name: {"gamma": 0.99},
+                                                                 below[0].name: {"gamma": 0.5}}})
+    trainer = HierarchyTrainer(Engine(env, params, h, make_agent("ppo"), cfg),
+                               plan_levels(h, "top-down"), [0], progress=False)
+    want = [0.95] * h.num_options
+    want[root.option], want[below[0].option] = 0.99, 0.5
+    assert trainer._option_gammas(0) == want
 
 
 def _in_the_joint_phase(trainer) -> bool:

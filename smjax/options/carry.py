@@ -110,7 +110,8 @@ class Controls:
     side_cost: float weight (or bool), a template learner is also rewarded by this times the
       decrease of its template's ``side_cost`` (None or 0: never; fine-tuning turns it on).
     gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs
-      with different discounts share one compile (a sweep).
+      with different discounts share one compile (a sweep). Joint fine-tuning gives one
+      per option (float [O]), and its record's discount is per option too.
     acts_frozen: a Python bool, not traced: the learner picks as the bank will run it once
       frozen (greedy or sampled, no exploration; only its params are read) instead of
       exploring through the agent's ``act``: the gate's and evaluation's mode (None: as

@@ -14,10 +14,16 @@ learner would have recorded had it been the only learner:
   is not after them), or the episode did;
 * ``action``, ``log_prob``, ``value``, ``action_mask``: its own.
 
-The observation and the per-tick discount are shared by all options. A record is a
-``Transition`` whose per-option fields are ``[B, O]`` (``[B, O, A]`` for the mask); under
-a rollout's scan they become ``[T, B, O]``, and ``OPTION_AXES`` maps a learner update over
-the option axis (the observation is not copied per option).
+* ``discount``: the tick's discount at the option's own gamma, the one its level trained
+  its values at (``TrainConfig.levels``: Fetch's recipe trains its root at 0.99 and its
+  place options at 0.96). One gamma shared by every option re-fits some of them to a
+  horizon they were not trained for: on Fetch, the place options at 0.99, where a tick
+  of idling costs them 1% of their value.
+
+The observation is shared by all options. A record is a ``Transition`` whose per-option
+fields are ``[B, O]`` (``[B, O, A]`` for the mask); under a rollout's scan they become
+``[T, B, O]``, and ``OPTION_AXES`` maps a learner update over the option axis (the
+observation is not copied per option).
 
 Each option's rows are those of the option alone: its decisions, its reward, its ends;
 nothing of another option's record reaches it (tests/test_joint.py checks the masks).
@@ -32,7 +38,7 @@ from smjax.core.transition import ActOutput, Transition
 # a rollout's joint record [T, B, O]: which axis of each field is the option axis (None:
 # shared by every option), for ``jax.vmap(update, in_axes=(0, ..., OPTION_AXES, ...))``
 OPTION_AXES = Transition(obs=None, action=2, action_mask=2, log_prob=2, value=2, decision=2,
-                         reward=2, discount=None, done=2, hidden=None)
+                         reward=2, discount=2, done=2, hidden=None)
 
 
 def option_rewards(reward: jax.Array, satisfied: jax.Array, on: jax.Array,
@@ -58,7 +64,8 @@ def option_transitions(obs: jax.Array, acts: ActOutput, masks: jax.Array, chose:
     """The tick's joint record: ``acts`` are every option's [O, B] (its own ``act``),
     ``masks`` [B, O, A], ``chose`` [B, O] (options that chose in this tick), ``learned``
     [O] (options that learn), ``reward`` and ``done`` [B, O] (``option_rewards``,
-    ``option_ends``), ``obs`` [B, ...] and ``discount`` [B] shared."""
+    ``option_ends``), ``discount`` [B, O] (each option's own gamma), ``obs`` [B, ...]
+    shared."""
     return Transition(
         obs=obs, action=acts.action.T.astype(jnp.int32), action_mask=masks,
         log_prob=acts.log_prob.T, value=acts.value.T, decision=chose & learned[None, :],

@@ -138,9 +138,12 @@ def pop(stack: ExecutionStack, stop: jax.Array, k_max: jax.Array, learner: jax.A
 
 # ---- account ------------------------------------------------------------------------
 def tick_discount(teleported: jax.Array, nominal: jax.Array, gamma) -> jax.Array:
-    """Per-tick discount: gamma, or gamma**d where a template was teleported (d = its
-    nominal duration), so a jump weighs as the steps it stands for (SMDP)."""
+    """Per-tick discount [B]: gamma, or gamma**d where a template was teleported (d = its
+    nominal duration), so a jump weighs as the steps it stands for (SMDP). With one
+    gamma per option ([O]: joint fine-tuning, each option at its own level's), [B, O]."""
     tp_steps = jnp.where(teleported >= 0, nominal[jnp.maximum(teleported, 0)], 1.0)
+    if jnp.ndim(gamma):
+        return jnp.asarray(gamma)[None, :] ** tp_steps[:, None]
     return gamma ** tp_steps
 
 

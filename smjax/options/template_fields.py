@@ -34,7 +34,8 @@ def side_costs(templates, env_params, before, after, discount, on, weight):
     ``side_cost`` c, times ``weight`` (``Controls.side_cost``), where it is ``on`` the
     stack (0 for the root, and 0.0 altogether where no weight is given or no template
     has a side cost). Summed over an option's run it telescopes to minus the discounted
-    cost it ends with, above what it started with."""
+    cost it ends with, above what it started with. ``discount``: [B], or [B, O] (each
+    option's own: ``phases.tick_discount``)."""
     if weight is None or not any(t.side_cost is not None for t in templates):
         return 0.0
     cost = jax.vmap(lambda s: per_option(templates, env_params, s, "side_cost", 0.0, jnp.float32))
@@ -42,7 +43,8 @@ def side_costs(templates, env_params, before, after, discount, on, weight):
     c1 = cost(after)
     weight = jnp.asarray(weight, jnp.float32)
     template = (jnp.arange(len(templates) + 1) > 0)[None, :]  # the root is option 0
-    return jnp.where(on & template, weight * (c0 - discount[:, None] * c1), 0.0)
+    per_option_discount = discount if discount.ndim == 2 else discount[:, None]
+    return jnp.where(on & template, weight * (c0 - per_option_discount * c1), 0.0)
 
 
 def task_success(success, env_params, state, info: dict) -> jax.Array | None:

@@ -193,8 +193,9 @@ class Engine:
         (leading axis O, warm-started from the bank: ``joint_state``), every learned
         option explores through its own and learns from its own record of every tick
         (``smjax.options.joint``); the learned hierarchy alone (no teleports), whole-task
-        episodes from the root. The other arguments and the outputs are ``_chunk``'s
-        (the learner metrics per option: [U, O])."""
+        episodes from the root. ``gamma``: float [O], each option's discount. The other
+        arguments and the outputs are ``_chunk``'s (the learner metrics per option:
+        [U, O])."""
         controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), learned,
                             jnp.asarray(False), jnp.asarray(False), side_cost=side_cost,
                             gamma=gamma, acts_frozen=True, joint=True)

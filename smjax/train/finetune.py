@@ -214,6 +214,14 @@ class FinetunePhase:
         """Seed ``s`` fine-tunes all its options at once (``arrays.joint``)."""
         return self.joint and self._finetuning(s)
 
+    def _option_gammas(self, s: int) -> list[float]:
+        """Joint fine-tuning's discount per option for slot ``s``: the one the option's
+        level trained it at (``levels[name]["gamma"]``), else the slot's: each option's
+        values keep the horizon they were learned for (``smjax.options.joint``)."""
+        level = {p.option: p.name for p in self.ft_order}
+        return [self.cfg.levels.get(level.get(o), {}).get("gamma", self.gamma[s])
+                for o in range(self.engine.h.num_options)]
+
     def _joint_chunk(self, seeds: list[int]):
         """Joint fine-tuning's compiled chunk for these seeds (the others keep their
         state); its stats and windows as ``_chunk``'s, each learned option's learner
@@ -223,7 +231,7 @@ class FinetunePhase:
         sizes = [[cfg.success_window, cfg.success_window]] * S
         args = (a.joint, self._per_seed([s in seeds for s in range(S)], bool), a.learned,
                 self._per_seed([weight] * S, jnp.float32),
-                self._per_seed([self._gamma(s) for s in range(S)], jnp.float32),
+                self._per_seed([self._option_gammas(s) for s in range(S)], jnp.float32),
                 (a.window, a.task_window), self._per_seed(sizes, jnp.int32))
         if self._compiled_joint is None:
             t0 = time.perf_counter()
