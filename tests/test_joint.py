@@ -12,9 +12,9 @@ from hier_env import make_keydoor
 from smjax.agents import make_agent
 from smjax.core.transition import ActOutput, Transition
 from smjax.options import joint
+from smjax.options.carry import NO_OPTION, Controls
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
-from smjax.options.carry import NO_OPTION, Controls
 from smjax.train.engine import Engine
 from smjax.train.loop import HierarchyTrainer
 from smjax.train.plans import plan_levels
