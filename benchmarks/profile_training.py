@@ -75,7 +75,8 @@ def build(args):
     _, h = resolve_hierarchy(env, cfg)
     plans = plan_levels(h, cfg.method)
     plan = plans[args.level - 1]
-    engine = Engine(env, params, h, make_agent(cfg.algo, **cfg.agent), cfg)
+    agent = make_agent(cfg.algo, layout=env.observation_layout(params), **cfg.agent)
+    engine = Engine(env, params, h, agent, cfg)
     S = args.seeds
     keys = jax.vmap(jax.random.PRNGKey)(jnp.arange(S, dtype=jnp.uint32))
     split = jax.vmap(lambda k: jax.random.split(k, 3))(keys)

@@ -1,4 +1,5 @@
-"""What one PPO update costs, memoryless against recurrent (``--agent recurrent_size``).
+"""What one PPO update costs, memoryless against recurrent (``--agent recurrent_size``),
+and a dense torso against a convolutional one (``--agent torso``).
 
 A rollout of the shape training uses (``--ticks`` + 1 rows with the pending one, ``--envs``
 environments, Craft's observation width) with a decision on every tick, updated by the
@@ -6,6 +7,7 @@ same jitted ``agent.update`` the engine calls; the sizes alternate, so a noisy m
 hits both alike. Prints the median seconds per update and the compile time of each.
 
     python benchmarks/update_cost.py --sizes 0 64 --repeats 5
+    python benchmarks/update_cost.py --sizes 0 --torsos mlp conv --repeats 5
 """
 from __future__ import annotations
 
@@ -40,6 +42,8 @@ def main() -> None:
     ap.add_argument("--task", default="craft/get_gem")
     ap.add_argument("--sizes", type=int, nargs="+", default=[0, 64],
                     help="recurrent_size values (0: memoryless)")
+    ap.add_argument("--torsos", nargs="+", default=["mlp"], choices=["mlp", "conv"],
+                    help="torso values (conv: over the observation's declared grids)")
     ap.add_argument("--ticks", type=int, default=33)
     ap.add_argument("--envs", type=int, default=128)
     ap.add_argument("--repeats", type=int, default=5)
@@ -49,23 +53,27 @@ def main() -> None:
     num_actions = 16
     runs = {}
     for size in args.sizes:
-        agent = make_agent("ppo", recurrent_size=size)
-        state = agent.init(jax.random.PRNGKey(1), obs, num_actions)
-        traj = rollout(jax.random.PRNGKey(2), obs.shape, num_actions, args.ticks, args.envs, size)
-        update = jax.jit(agent.update)
-        t0 = time.perf_counter()
-        compiled = update.lower(state, traj, jax.random.PRNGKey(3)).compile()
-        runs[size] = (compiled, state, traj, time.perf_counter() - t0, [])
+        for torso in args.torsos:
+            agent = make_agent("ppo", layout=env.observation_layout(params), recurrent_size=size,
+                               torso=torso)
+            state = agent.init(jax.random.PRNGKey(1), obs, num_actions)
+            traj = rollout(jax.random.PRNGKey(2), obs.shape, num_actions, args.ticks, args.envs,
+                           size)
+            update = jax.jit(agent.update)
+            t0 = time.perf_counter()
+            compiled = update.lower(state, traj, jax.random.PRNGKey(3)).compile()
+            runs[size, torso] = (compiled, state, traj, time.perf_counter() - t0, [])
     for r in range(args.repeats):
-        for size, (compiled, state, traj, _, times) in runs.items():
+        for compiled, state, traj, _, times in runs.values():
             t0 = time.perf_counter()
             jax.block_until_ready(compiled(state, traj, jax.random.PRNGKey(r)))
             times.append(time.perf_counter() - t0)
-    base = statistics.median(runs[args.sizes[0]][4])
-    for size, (_, _, _, compile_s, times) in runs.items():
+    first = next(iter(runs))
+    base = statistics.median(runs[first][4])
+    for (size, torso), (_, _, _, compile_s, times) in runs.items():
         med = statistics.median(times)
-        print(f"recurrent_size {size:4d}: update {med:.3f} s (median of {len(times)}; "
-              f"{med / base:.2f}x of size {args.sizes[0]}), compile {compile_s:.1f} s, "
+        print(f"recurrent_size {size:4d}, torso {torso}: update {med:.3f} s (median of "
+              f"{len(times)}; {med / base:.2f}x of {first}), compile {compile_s:.1f} s, "
               f"obs {obs.size} wide, {args.ticks} x {args.envs} ticks")
 
 

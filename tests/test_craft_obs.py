@@ -119,3 +119,27 @@ def test_observation_spaces_and_none():
         chex.assert_tree_all_finite(obs.astype(jnp.float32))
         obs2, *_ = env.step(jax.random.PRNGKey(2), state, jnp.int32(4), params)
         assert obs2.shape == shape
+
+
+@_SETTINGS
+@given(craft_states(max_inventory=3))
+def test_declared_grids_are_the_observations_windows(start):
+    # Environment.observation_layout: each declared grid, reshaped (height, width, kind),
+    # holds at [i, j] the cell (x - half + i, y - half + j) around the agent
+    grid, pos, direction, inv = start
+    state = to_state(grid, pos, direction, inv)
+    x, y = pos
+    for kind, fn, windows in (("paper", _paper, [(5, 1), (25, 5)]), ("compact", _compact, [(3, 1)])):
+        obs = np.asarray(fn(state))
+        layout = O.observation_layout(kind)
+        assert len(layout) == len(windows)
+        for g, (size, pool) in zip(layout, windows):
+            cells = obs[g.start:g.stop].reshape(g.height, g.width, g.channels)
+            assert (g.height, g.width) == (size // pool, size // pool)
+            for i in range(size):
+                for j in range(size):
+                    cx, cy = x - size // 2 + i, y - size // 2 + j
+                    inside = 0 <= cx < N and 0 <= cy < N
+                    if inside and (kind == "compact" or grid[cx, cy] != C.EMPTY):
+                        assert cells[i // pool, j // pool, grid[cx, cy]] == 1
+    assert O.observation_layout("none") == ()

@@ -195,12 +195,20 @@ class WildControllerKeyDoor(KeyDoor):
                                        controller=lambda k, s, p: jnp.asarray(7))}
 
 
+class GridPastTheEndCorridor(Corridor):
+    """Declares an observation grid that runs past the observation's end."""
+
+    def observation_layout(self, params=None):
+        return ((0, 4, 4, 4),)
+
+
 @pytest.mark.parametrize("env,match", [
     (LoudCorridor(), "observation in space failed for tests/corridor"),
+    (GridPastTheEndCorridor(), "spaces failed for tests/corridor: observation_layout: "),
     (BatchSensitiveCorridor(), r"vmap == loop failed for tests/corridor: step 0, env 0: "
                                r"leaf \[2\]"),  # the reward
     (NoResetCorridor(), "auto-reset failed for tests/corridor"),
-], ids=["obs-outside-space", "vmap-differs", "no-auto-reset"])
+], ids=["obs-outside-space", "grid-past-the-end", "vmap-differs", "no-auto-reset"])
 def test_broken_env_is_named(env, match):
     with pytest.raises(AssertionError, match=match):
         check_env(env, env.default_params, **SMALL)

@@ -132,12 +132,14 @@ def test_unknown_config_field_and_bad_seeds():
 
 
 @pytest.mark.slow  # ~1-3 min of a 2-core CI; the key-door runs above check learning by default
-def test_craft_get_wood_reaches_threshold_on_cpu():
+@pytest.mark.parametrize("torso", ["mlp", "conv"])
+def test_craft_get_wood_reaches_threshold_on_cpu(torso):
     # No acceptance gate (its own compile and 256 episodes): what this test examines is that
     # PPO learns Craft on the CPU, and final_success below runs the learned policy alone.
-    # The gate is examined on the key-door runs above.
+    # The gate is examined on the key-door runs above. "conv": the 3 x 3 window read by
+    # convolutions (tests/test_conv_torso.py).
     cfg = TrainConfig(num_envs=64, rollout_ticks=32, updates_per_chunk=4, max_episodes_per_level=6000,
-                      eval_envs=128, gate=False, finetune="off")
+                      eval_envs=128, gate=False, finetune="off", agent={"torso": torso})
     res = run("craft/get_wood", cfg, [0], progress=False, env_overrides={"observation": "compact"})
     level = res["levels"][0]
     assert level["reached"] == [True] and level["final_running_success"][0] >= 0.8

@@ -16,7 +16,7 @@ decision still running at a rollout's end is carried into the next rollout with
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 from smjax.agents import actor_critic, dqn, ppo
 from smjax.agents.actor_critic import ActorCriticConfig
@@ -44,10 +44,12 @@ def make_config(algo: str, **config_overrides: Any) -> Any:
     return replace_checked(default_config(algo), **config_overrides)
 
 
-def make_agent(algo: str, **config_overrides: Any) -> Agent:
-    """Build the learner ``algo`` (one of :data:`ALGOS`) with config fields overridden."""
+def make_agent(algo: str, layout: Sequence = (), **config_overrides: Any) -> Agent:
+    """Build the learner ``algo`` (one of :data:`ALGOS`) with config fields overridden;
+    ``layout``: the observation's grids (``Environment.observation_layout``), which a
+    ``torso="conv"`` learner reads with convolutions (ValueError where there are none)."""
     config = make_config(algo, **config_overrides)  # validates algo before the lookup below
-    return _MAKERS[algo](config)
+    return _MAKERS[algo](config, layout)
 
 
 __all__ = [

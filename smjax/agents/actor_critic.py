@@ -27,7 +27,8 @@ import optax
 
 from smjax.agents import config as checks
 from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
-from smjax.agents.networks import flatten_obs, masked_entropy, masked_log_softmax, masked_mean, take_action
+from smjax.agents.networks import (flatten_obs, masked_entropy, masked_log_softmax, masked_mean,
+                                   take_action, torso_grids)
 from smjax.agents.ppo import (
     PolicyGradientState,
     init_policy_gradient_state,
@@ -45,6 +46,11 @@ class ActorCriticConfig:
     hidden_sizes: tuple[int, ...] = (100,)
     activation: str = "relu"
     shared_torso: bool = False
+    # "conv": the observation's declared grids (Craft's windows) pass through 3 x 3
+    # convolutions of ``conv_features`` channels per layer before the dense layers
+    # (networks.GridEncoder; the environment declares them: Environment.observation_layout)
+    torso: str = "mlp"
+    conv_features: tuple[int, ...] = (16, 16)
     epsilon_decay: float = 5e-3      # epsilon = max(epsilon_min, exp(-epsilon_decay * episodes))
     epsilon_min: float = 0.0
     vf_coef: float = 0.5
@@ -57,6 +63,7 @@ class ActorCriticConfig:
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
         checks.check_range(self, "gamma", 0.0, 1.0)
         checks.check_hidden_sizes(self)
+        checks.check_torso(self)
         checks.check_choice(self, "activation", ("tanh", "relu", "gelu", "elu", "swish"))
         checks.check_range(self, "epsilon_decay", 0.0)
         checks.check_range(self, "epsilon_min", 0.0, 1.0)
@@ -74,7 +81,8 @@ def exploration_epsilon(config: ActorCriticConfig, episodes_seen: jax.Array) -> 
     return jnp.maximum(decayed, config.epsilon_min)
 
 
-def make_agent(config: ActorCriticConfig | None = None) -> Agent:
+def make_agent(config: ActorCriticConfig | None = None, layout=()) -> Agent:
+    """``layout``: the observation's grids, read by a "conv" torso (``ppo.make_agent``)."""
     config = ActorCriticConfig() if config is None else config
     adam = optax.scale_by_adam()  # the learning rate comes from state.hp (scale_by_lr)
     optimizer = (
@@ -84,7 +92,8 @@ def make_agent(config: ActorCriticConfig | None = None) -> Agent:
     )
 
     def network_for(num_actions: int):
-        return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso)
+        return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso,
+                            torso_grids(config.torso, layout), config.conv_features)
 
     def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
         return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions,

@@ -74,8 +74,9 @@ def replace_checked(config: Any, **overrides: Any) -> Any:
         raise ValueError(
             f"unknown {type(config).__name__} field(s) {unknown}; valid fields: {', '.join(valid)}"
         )
-    if "hidden_sizes" in overrides and isinstance(overrides["hidden_sizes"], list):
-        overrides["hidden_sizes"] = tuple(overrides["hidden_sizes"])  # keep configs hashable
+    for name in ("hidden_sizes", "conv_features"):
+        if name in overrides and isinstance(overrides[name], list):
+            overrides[name] = tuple(overrides[name])  # keep configs hashable
     return dataclasses.replace(config, **overrides)
 
 
@@ -88,3 +89,13 @@ def check_num_actions(num_actions: Any) -> int:
     if count < 1 or count != num_actions:
         raise ValueError(f"num_actions must be an integer >= 1, got {num_actions!r}")
     return count
+
+
+TORSOS = ("mlp", "conv")
+
+
+def check_torso(config: Any) -> None:
+    """``torso`` ("mlp", or "conv": convolutions over the observation's declared grids,
+    ``networks.GridEncoder``) and its ``conv_features`` (channels per layer)."""
+    check_choice(config, "torso", TORSOS)
+    check_hidden_sizes(config, "conv_features")

@@ -34,6 +34,7 @@ from smjax.agents.networks import (
     masked_logits,
     sample_from_log_probs,
     take_action,
+    torso_grids,
     uniform_allowed_probs,
 )
 from smjax.agents.smdp import episodes_with_decision, smdp_transitions
@@ -45,6 +46,11 @@ class DQNConfig:
     gamma: float = 0.99               # for the trainer's Transition.discount; not read here
     hidden_sizes: tuple[int, ...] = (64, 64)
     activation: str = "relu"
+    # "conv": the observation's declared grids (Craft's windows) pass through 3 x 3
+    # convolutions of ``conv_features`` channels per layer before the dense layers
+    # (networks.GridEncoder; the environment declares them: Environment.observation_layout)
+    torso: str = "mlp"
+    conv_features: tuple[int, ...] = (16, 16)
     buffer_capacity: int = 10_000
     batch_size: int = 64
     gradient_steps_per_update: int = 1
@@ -65,6 +71,7 @@ class DQNConfig:
         checks.check_range(self, "gamma", 0.0, 1.0)
         checks.check_range(self, "reward_scale", 0.0, 1e6, low_open=True)
         checks.check_hidden_sizes(self)
+        checks.check_torso(self)
         checks.check_choice(self, "activation", ("tanh", "relu", "gelu", "elu", "swish"))
         for name in ("buffer_capacity", "batch_size", "gradient_steps_per_update",
                      "target_update_period", "epsilon_decay_steps"):
@@ -150,14 +157,16 @@ def smdp_td_targets(q_next_online, q_next_target, reward, discount, terminal, ne
     return reward + discount * (1.0 - terminal.astype(jnp.float32)) * q_next
 
 
-def make_agent(config: DQNConfig | None = None) -> Agent:
+def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
+    """``layout``: the observation's grids, read by a "conv" torso (``ppo.make_agent``)."""
     config = DQNConfig() if config is None else config
     optimizer = optax.chain(
         optax.clip_by_global_norm(config.max_grad_norm), optax.scale_by_adam()  # lr: state.hp
     )
 
     def network_for(num_actions: int) -> QNetwork:
-        return QNetwork(num_actions, tuple(config.hidden_sizes), config.activation)
+        return QNetwork(num_actions, tuple(config.hidden_sizes), config.activation,
+                        torso_grids(config.torso, layout), tuple(config.conv_features))
 
     def q_values(params, obs: jax.Array) -> jax.Array:
         num_actions = params["params"]["q_head"]["kernel"].shape[-1]

@@ -36,6 +36,7 @@ from smjax.agents.networks import (
     masked_mean,
     sample_from_log_probs,
     take_action,
+    torso_grids,
 )
 from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_gae
 
@@ -65,6 +66,11 @@ class PPOConfig:
     hidden_sizes: tuple[int, ...] = (64, 64)
     activation: str = "tanh"
     shared_torso: bool = False
+    # "conv": the observation's declared grids (Craft's windows) pass through 3 x 3
+    # convolutions of ``conv_features`` channels per layer before the dense layers
+    # (networks.GridEncoder; the environment declares them: Environment.observation_layout)
+    torso: str = "mlp"
+    conv_features: tuple[int, ...] = (16, 16)
     # A recurrent policy (0: memoryless): a GRU memory of this width, carried from each of
     # the option's decisions to its next (``networks.RecurrentActorCritic``), trained by
     # backpropagation through the rollout, minibatches then being sets of environments.
@@ -88,6 +94,9 @@ class PPOConfig:
         checks.check_range(self, "target_kl", 0.0)
         checks.check_hidden_sizes(self)
         checks.check_non_negative_int(self, "recurrent_size")
+        checks.check_torso(self)
+        if self.recurrent_size and self.torso == "conv":
+            raise ValueError("recurrent_size > 0 runs the dense torso only: use torso='mlp'")
         if self.recurrent_size and self.shared_torso:
             raise ValueError("recurrent_size > 0 needs shared_torso=False (the recurrent "
                              "network gives actor and critic their own torso)")
@@ -112,8 +121,10 @@ class PolicyGradientState:
 SWEEPABLE = ("learning_rate", "gae_lambda", "clip_eps", "ent_coef", "vf_coef", "target_kl")
 
 
-def make_network(num_actions: int, hidden_sizes, activation: str, shared_torso: bool):
-    return ActorCritic(num_actions, tuple(hidden_sizes), activation, shared_torso)
+def make_network(num_actions: int, hidden_sizes, activation: str, shared_torso: bool,
+                 grids=(), conv_features=(16, 16)):
+    return ActorCritic(num_actions, tuple(hidden_sizes), activation, shared_torso, tuple(grids),
+                       tuple(conv_features))
 
 
 def init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions, hp,
@@ -207,7 +218,9 @@ def apply_if(pred: jax.Array, new: Any, old: Any) -> Any:
     return jax.tree.map(lambda n, o: jnp.where(pred, n, o), new, old)
 
 
-def make_agent(config: PPOConfig | None = None) -> Agent:
+def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
+    """``layout``: the observation's grids (``Environment.observation_layout``), read by a
+    "conv" torso."""
     config = PPOConfig() if config is None else config
     # optax.adam without its learning rate, which is applied from state.hp (scale_by_lr)
     optimizer = optax.chain(
@@ -220,7 +233,8 @@ def make_agent(config: PPOConfig | None = None) -> Agent:
         if memory:
             return RecurrentActorCritic(num_actions, tuple(config.hidden_sizes),
                                         config.activation, memory)
-        return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso)
+        return make_network(num_actions, config.hidden_sizes, config.activation, config.shared_torso,
+                            torso_grids(config.torso, layout), config.conv_features)
 
     def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
         return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions,

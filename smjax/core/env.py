@@ -102,6 +102,11 @@ class Environment(Generic[TEnvState, TEnvParams]):
         """RGB uint8 image (H, W, 3) of one (unbatched) state."""
         raise NotImplementedError
 
+    def observation_layout(self, params: TEnvParams | None = None) -> tuple:
+        """The grids of the flattened observation (``smjax.core.layout.Grid``), for
+        learners with a convolutional torso; none by default."""
+        return ()
+
     def templates(self) -> dict:
         """Option templates this environment offers, by name (may be empty)."""
         return {}

@@ -7,6 +7,7 @@ Compile time dominates on a CPU, so the checks share three programs: the eager
 """
 from __future__ import annotations
 
+import math
 import weakref
 from typing import Any, Callable
 
@@ -15,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.core import spaces
+from smjax.core.layout import check_layout
 from smjax.testing.compare import (
     ATOL, RTOL, assert_trees_close, fail, index, tolerances, trees_mismatch,
 )
@@ -90,6 +92,10 @@ def check_spaces(env, params, who: str) -> tuple[spaces.Space, spaces.Space]:
     for name, space in (("action_space", act), ("observation_space", obs)):
         if not isinstance(space, spaces.Space):
             fail("spaces", who, f"{name} returned {type(space).__name__}, not a smjax space")
+    try:  # the grids a conv torso would read lie inside the flattened observation
+        check_layout(env.observation_layout(params), math.prod(obs.shape))
+    except ValueError as err:
+        fail("spaces", who, f"observation_layout: {err}")
     return act, obs
 
 

@@ -42,7 +42,8 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
         raise ValueError(f"{run_dir} was not trained with this hierarchy")
     env, params = make(run["task"], **run["env_overrides"])
     _, hierarchy = resolve_hierarchy(env, cfg, hierarchy)
-    engine = Engine(env, params, hierarchy, make_agent(cfg.algo, **cfg.agent), cfg)
+    agent = make_agent(cfg.algo, layout=env.observation_layout(params), **cfg.agent)
+    engine = Engine(env, params, hierarchy, agent, cfg)
     trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), run["seeds"],
                                out_dir=run_dir, progress=False, run_meta=run)
     trainer.restore()

@@ -140,12 +140,12 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
                 given: Hierarchy | None = None) -> dict:
     from smjax.agents import make_agent  # (imported late: tests replace it)
 
-    agent = make_agent(cfg.algo, **cfg.agent)
     points = sweep_points(sweep) if sweep is not None else None
     if isinstance(task, str):
         env, env_params = make(task, **env_overrides)
     else:
         env, env_params = task
+    agent = make_agent(cfg.algo, layout=env.observation_layout(env_params), **cfg.agent)
     hierarchy_name, hierarchy = resolve_hierarchy(env, cfg, given)
     identity = run_identity(env.name, cfg, seeds, env_overrides)
     if given is not None:  # its shape must match on resume

@@ -65,6 +65,9 @@ class CraftEnv(Environment[CraftState, CraftParams]):
     def observation_space(self, params: CraftParams | None = None) -> spaces.Box:
         return observation.observation_space(self.config.observation)
 
+    def observation_layout(self, params: CraftParams | None = None) -> tuple:
+        return observation.observation_layout(self.config.observation)
+
     @property
     def primitive_action_names(self) -> tuple[str, ...]:
         return C.ACTION_NAMES

@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.core import spaces
+from smjax.core.layout import Grid
 from smjax.envs.craft import constants as C
 from smjax.envs.craft.types import CraftState
 
@@ -126,6 +127,17 @@ def none_obs(state: CraftState) -> jax.Array:
 
 
 OBSERVATION_FNS = {"paper": paper_obs, "compact": compact_obs, "none": none_obs}
+
+
+def observation_layout(kind: str) -> tuple[Grid, ...]:
+    """The grids of each observation (docs/environments.md): the paper's 5 x 5 window and
+    its 25 x 25 window pooled 5 x 5, each dx-major, then dy, then one channel per kind;
+    the compact 3 x 3 window over the 13 map kinds."""
+    if kind == "paper":
+        return (Grid(0, 5, 5, K), Grid(25 * K, 5, 5, K))
+    if kind == "compact":
+        return (Grid(0, 3, 3, NUM_MAP_KINDS),)
+    return ()
 
 
 def observation_space(kind: str) -> spaces.Box:
