@@ -46,9 +46,7 @@ class ActorCriticConfig:
     hidden_sizes: tuple[int, ...] = (100,)
     activation: str = "relu"
     shared_torso: bool = False
-    # "conv": the observation's declared grids (Craft's windows) pass through 3 x 3
-    # convolutions of ``conv_features`` channels per layer before the dense layers
-    # (networks.GridEncoder; the environment declares them: Environment.observation_layout)
+    # "conv": convolutions over the observation's declared grids, as PPOConfig's
     torso: str = "mlp"
     conv_features: tuple[int, ...] = (16, 16)
     epsilon_decay: float = 5e-3      # epsilon = max(epsilon_min, exp(-epsilon_decay * episodes))

@@ -46,9 +46,7 @@ class DQNConfig:
     gamma: float = 0.99               # for the trainer's Transition.discount; not read here
     hidden_sizes: tuple[int, ...] = (64, 64)
     activation: str = "relu"
-    # "conv": the observation's declared grids (Craft's windows) pass through 3 x 3
-    # convolutions of ``conv_features`` channels per layer before the dense layers
-    # (networks.GridEncoder; the environment declares them: Environment.observation_layout)
+    # "conv": convolutions over the observation's declared grids, as PPOConfig's
     torso: str = "mlp"
     conv_features: tuple[int, ...] = (16, 16)
     buffer_capacity: int = 10_000
