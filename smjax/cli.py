@@ -56,7 +56,10 @@ def _add_train(sub):
     p.add_argument("--out", default=None, help="output directory (default: runs/ENV_TASK_METHOD)")
     p.add_argument("--config", default=None, help="YAML or JSON file with TrainConfig fields")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE", help="override a TrainConfig field")
-    p.add_argument("--agent", action="append", metavar="KEY=VALUE", help="learner hyper-parameter")
+    p.add_argument("--agent", action="append", metavar="KEY=VALUE",
+                   help="learner hyper-parameter (a field of the algo's config, e.g. "
+                        "learning_rate=3e-4, hidden_sizes=[128,128], torso=conv: convolutions "
+                        "over the observation's grids, recurrent_size=64: a GRU memory)")
     p.add_argument("--env", action="append", metavar="KEY=VALUE", help="environment override")
     p.add_argument("--sweep", action="append", metavar="FIELD=V1,V2",
                    help="hyper-parameter sweep, e.g. --sweep agent.learning_rate=1e-4,3e-4 "
