@@ -63,9 +63,8 @@ def dense_flops(params) -> int:
 
 def build(args):
     import smjax
-    from smjax.agents import make_agent
     from smjax.train.config import TrainConfig
-    from smjax.train.engine import Engine, SeedState
+    from smjax.train.engine import Engine, SeedState, make_learner
     from smjax.train.plans import plan_levels, resolve_hierarchy
 
     overrides = dict(kv.split("=", 1) for kv in args.env)
@@ -75,8 +74,7 @@ def build(args):
     _, h = resolve_hierarchy(env, cfg)
     plans = plan_levels(h, cfg.method)
     plan = plans[args.level - 1]
-    agent = make_agent(cfg.algo, layout=env.observation_layout(params), **cfg.agent)
-    engine = Engine(env, params, h, agent, cfg)
+    engine = Engine(env, params, h, make_learner(env, params, cfg), cfg)
     S = args.seeds
     keys = jax.vmap(jax.random.PRNGKey)(jnp.arange(S, dtype=jnp.uint32))
     split = jax.vmap(lambda k: jax.random.split(k, 3))(keys)

@@ -98,17 +98,17 @@ class GridEncoder(nn.Module):
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         act = activation_by_name(self.activation)
-        check_layout(self.grids, x.shape[-1])
+        grids = check_layout(self.grids, x.shape[-1])
         lead = x.shape[:-1]
         parts = []
-        for g, (start, height, width, channels) in enumerate(self.grids):
-            cells = x[..., start:start + height * width * channels]
-            cells = cells.reshape(lead + (height, width, channels))
+        for g, grid in enumerate(grids):
+            cells = x[..., grid.start:grid.stop]
+            cells = cells.reshape(lead + (grid.height, grid.width, grid.channels))
             for layer, size in enumerate(self.features):
                 conv = _dense(size, float(np.sqrt(2)), name=f"grid_{g}_conv_{layer}")
                 cells = act(conv(_patches_3x3(cells)))
             parts.append(cells.reshape(lead + (-1,)))
-        rest = np.asarray(flat_rest([Grid(*g) for g in self.grids], x.shape[-1]), np.int32)
+        rest = np.asarray(flat_rest(grids, x.shape[-1]), np.int32)
         return jnp.concatenate(parts + [x[..., rest]], axis=-1)
 
 
@@ -123,7 +123,7 @@ def torso_grids(torso: str, layout) -> tuple:
         raise ValueError("torso 'conv' needs an observation that declares grids "
                          "(Environment.observation_layout); this one declares none: use "
                          "torso 'mlp'")
-    return tuple(tuple(Grid(*g)) for g in layout)
+    return tuple(Grid(*g) for g in layout)
 
 
 def encoded(x: jax.Array, grids, features, activation: str = "relu") -> jax.Array:

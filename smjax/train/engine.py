@@ -57,6 +57,15 @@ class _FrozenLearner(NamedTuple):
     params: Any
 
 
+def make_learner(env, env_params, cfg: TrainConfig):
+    """The learner ``cfg`` names (``cfg.algo`` with ``cfg.agent``), given the grids the
+    environment declares in its observation (``Environment.observation_layout``), which a
+    ``torso="conv"`` learner reads."""
+    from smjax.agents import make_agent  # looked up at each call: tests replace it
+
+    return make_agent(cfg.algo, layout=env.observation_layout(env_params), **cfg.agent)
+
+
 def frozen_mode(cfg: TrainConfig, agent) -> str:
     """How frozen policies act: the config's choice, else what the learner declares."""
     return agent.frozen_policy if cfg.frozen_policy == "auto" else cfg.frozen_policy

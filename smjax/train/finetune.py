@@ -219,8 +219,7 @@ class FinetunePhase:
         level trained it at (``levels[name]["gamma"]``), else the slot's: each option's
         values keep the horizon they were learned for (``smjax.options.joint``)."""
         level = {p.option: p.name for p in self.ft_order}
-        return [self.cfg.levels.get(level.get(o), {}).get("gamma", self.gamma[s])
-                for o in range(self.engine.h.num_options)]
+        return [self._level_gamma(level.get(o), s) for o in range(self.engine.h.num_options)]
 
     def _joint_chunk(self, seeds: list[int]):
         """Joint fine-tuning's compiled chunk for these seeds (the others keep their

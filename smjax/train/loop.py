@@ -198,9 +198,13 @@ class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
         return self.cfg.for_level(self._plan(s).name)
 
     def _gamma(self, s: int) -> float:
-        """A slot's discount: its level's own (``levels[name]["gamma"]``), else the slot's
+        """A slot's discount at the level it trains (``_level_gamma``)."""
+        return self._level_gamma(self._plan(s).name, s)
+
+    def _level_gamma(self, name: str | None, s: int) -> float:
+        """Level ``name``'s own discount (``levels[name]["gamma"]``), else slot ``s``'s
         (``cfg.gamma``, or its sweep point's)."""
-        return self.cfg.levels.get(self._plan(s).name, {}).get("gamma", self.gamma[s])
+        return self.cfg.levels.get(name, {}).get("gamma", self.gamma[s])
 
     def _per_seed(self, values, dtype) -> jax.Array:
         return self._place_small(jnp.asarray(values, dtype))

@@ -11,7 +11,7 @@ from smjax.core.registry import make
 from smjax.options.runner import NO_OPTION, Controls
 from smjax.train import checkpoint as ckpt
 from smjax.train.config import resolve_config
-from smjax.train.engine import Engine
+from smjax.train.engine import Engine, make_learner
 from smjax.train.loop import HierarchyTrainer
 from smjax.train.plans import declared_identity, plan_levels, resolve_hierarchy
 
@@ -23,8 +23,6 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
     A run stopped before its last level would play a partly untrained hierarchy: refused
     unless ``partial``. ``task``, when given, must be the run's task. A run trained with a
     declared hierarchy (``run(..., hierarchy=Hierarchy)``) needs the same one here."""
-    from smjax.agents import make_agent
-
     info = ckpt.load_meta(run_dir)
     if info is None:
         raise FileNotFoundError(f"{run_dir} holds no checkpoint (train with --out {run_dir} first)")
@@ -42,8 +40,7 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
         raise ValueError(f"{run_dir} was not trained with this hierarchy")
     env, params = make(run["task"], **run["env_overrides"])
     _, hierarchy = resolve_hierarchy(env, cfg, hierarchy)
-    agent = make_agent(cfg.algo, layout=env.observation_layout(params), **cfg.agent)
-    engine = Engine(env, params, hierarchy, agent, cfg)
+    engine = Engine(env, params, hierarchy, make_learner(env, params, cfg), cfg)
     trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), run["seeds"],
                                out_dir=run_dir, progress=False, run_meta=run)
     trainer.restore()

@@ -11,7 +11,7 @@ from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
 from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_differences,
                                  resolve_config)
-from smjax.train.engine import Engine
+from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.loop import HierarchyTrainer, NonFiniteError
 from smjax.train.plans import declared_identity, plan_levels, resolve_hierarchy
@@ -138,14 +138,12 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides: dict,
                 progress: bool, resume: bool, sweep: dict | None,
                 given: Hierarchy | None = None) -> dict:
-    from smjax.agents import make_agent  # (imported late: tests replace it)
-
     points = sweep_points(sweep) if sweep is not None else None
     if isinstance(task, str):
         env, env_params = make(task, **env_overrides)
     else:
         env, env_params = task
-    agent = make_agent(cfg.algo, layout=env.observation_layout(env_params), **cfg.agent)
+    agent = make_learner(env, env_params, cfg)
     hierarchy_name, hierarchy = resolve_hierarchy(env, cfg, given)
     identity = run_identity(env.name, cfg, seeds, env_overrides)
     if given is not None:  # its shape must match on resume
