@@ -1,11 +1,14 @@
 """Where a trained hierarchy's teleport-free episodes end: per seed, the share with a
-positive return, the return's distribution, episode lengths and episodes still running
-at the tick cap.
+positive return, the return's distribution, episode lengths, episodes still running
+at the tick cap, the ticks each option spends on top of the stack, and which option
+was on top when an episode ended short of full success (any environment: where a
+hierarchy loses its episodes).
 
     python benchmarks/diagnose_hierarchy.py RUN_DIR [--episodes 1024] [--policy sample]
-        [--max-ticks 2000] [--json OUT.json]
+        [--max-ticks 2000] [--partial] [--json OUT.json]
 
-RUN_DIR is a finished ``smjax train ... --out RUN_DIR``. Every seed's hierarchy runs alone
+RUN_DIR is a finished ``smjax train ... --out RUN_DIR`` (``--partial``: a stopped one;
+seeds still in their levels play partly trained options). Every seed's hierarchy runs alone
 (root on the stack, no teleports, nobody learning), as the final evaluation does, and
 each environment's first episode counts.
 
@@ -44,7 +47,9 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     episode; per environment (return, success, length in ticks, finished), and, where the
     state has an inventory, the units of each item gained per option [O, K] (summed over
     first episodes; a gain counts for the option on top of the stack when the tick starts,
-    so a call's first step counts for its caller; an episode's last step is not seen)."""
+    so a call's first step counts for its caller; an episode's last step is not seen);
+    the ticks of each first episode with each option on top [B, O]; and the option on top
+    in each first episode's last tick [B]."""
     runner = engine.runner
     O = engine.h.num_options
 
@@ -59,7 +64,7 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             return ~c[2].all() & (c[6] < max_ticks)
 
         def body(c):
-            carry, key, done, ret, success, length, t, gains = c
+            carry, key, done, ret, success, length, t, gains, on_top, last_top = c
             key, k = jax.random.split(key)
             before, top = _inventory(carry.env_state), jax.vmap(stack_top)(carry.stack)
             carry, _, ends = runner.tick(carry, k, None, bank, controls)  # nobody learns
@@ -68,18 +73,41 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
                 gain = jnp.where(counted, jnp.maximum(_inventory(carry.env_state) - before, 0), 0)
                 gains = gains + jax.nn.one_hot(jnp.maximum(top, 0), O).T @ gain
             first = ends.finished & ~done
+            top_hot = jax.nn.one_hot(jnp.maximum(top, 0), O, dtype=jnp.int32)
+            on_top = on_top + jnp.where(done[:, None], 0, top_hot)
             return (carry, key, done | ends.finished, jnp.where(first, ends.ret, ret),
                     jnp.where(first, ends.success, success), jnp.where(first, t + 1, length),
-                    t + 1, gains)
+                    t + 1, gains, on_top, jnp.where(done, last_top, jnp.maximum(top, 0)))
 
         inv = _inventory(carry.env_state)
         gains = jnp.zeros((O, 0 if inv is None else inv.shape[-1]), jnp.float32)
         init = (carry, key, jnp.zeros((num_envs,), bool), zeros, zeros,
-                jnp.zeros((num_envs,), jnp.int32), jnp.asarray(0), gains)
-        _, _, done, ret, success, length, _, gains = jax.lax.while_loop(cond, body, init)
-        return ret, success, length, done, gains / num_envs
+                jnp.zeros((num_envs,), jnp.int32), jnp.asarray(0), gains,
+                jnp.zeros((num_envs, O), jnp.int32), jnp.zeros((num_envs,), jnp.int32))
+        out = jax.lax.while_loop(cond, body, init)
+        done, ret, success, length, gains, on_top, last_top = (out[2], out[3], out[4], out[5],
+                                                               out[7], out[8], out[9])
+        return ret, success, length, done, gains / num_envs, on_top, last_top
 
     return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, None)))
+
+
+def where_time_goes(on_top, last_top, success, done, names) -> dict:
+    """Mean ticks per episode with each option on top, in fully successful episodes and
+    in the others, and the share of the others that ended (or hit the cap) with each
+    option on top."""
+    on_top, last_top, success, done = (np.asarray(x) for x in (on_top, last_top, success, done))
+    full = done & (success >= 1.0)
+
+    def ticks(mask):
+        return ({n: round(float(on_top[mask, o].mean()), 1) for o, n in enumerate(names)
+                 if on_top[mask, o].mean() >= 0.05} if mask.any() else None)
+
+    short = ~full
+    ended = collections.Counter(names[o] for o in last_top[short].tolist())
+    return {"ticks_on_top_full_success": ticks(full), "ticks_on_top_others": ticks(short),
+            "top_at_end_of_others": {k: round(v / max(short.sum(), 1), 3)
+                                     for k, v in ended.most_common()}}
 
 
 def summarize(ret, success, length, done) -> dict:
@@ -97,6 +125,8 @@ def summarize(ret, success, length, done) -> dict:
         "length_positive_p90": float(np.percentile(length[positive], 90)) if positive.any() else None,
         "length_zero_median": (float(np.median(length[done & (ret <= 0)]))
                                if (done & (ret <= 0)).any() else None),
+        "success_histogram": {f"{k:.2f}": v for k, v in sorted(collections.Counter(
+            np.round(success[done], 2).tolist()).items())},
     }
 
 
@@ -107,19 +137,24 @@ def main(argv=None) -> int:
     parser.add_argument("--policy", default="sample", choices=sorted(EVAL_TEMPERATURES))
     parser.add_argument("--max-ticks", type=int, default=2000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--partial", action="store_true",
+                        help="play a run stopped before its last level (its untrained options as they are)")
     parser.add_argument("--json", help="also write the report here")
     args = parser.parse_args(argv)
     if args.episodes < 1 or args.max_ticks < 1:
         parser.error("--episodes and --max-ticks must be >= 1")
-    engine, bank, learned, seeds = load_trained(args.run_dir)
+    engine, bank, learned, seeds = load_trained(args.run_dir, partial=args.partial)
     program = episodes_program(engine, args.episodes, args.max_ticks)
     keys = jax.random.split(jax.random.key(args.seed), len(seeds))
     out = program(keys, bank, learned, eval_temperatures(args.policy, engine.h.num_options,
                                                            engine.cfg.option_temperature))
-    per_seed = [summarize(*(x[i] for x in out[:4])) for i in range(len(seeds))]
+    names = list(engine.h.option_names)
+    per_seed = [summarize(*(x[i] for x in out[:4]))
+                | where_time_goes(out[5][i], out[6][i], out[1][i], out[3][i], names)
+                for i in range(len(seeds))]
     gains = np.asarray(out[4]).mean(0)  # [O, K], mean over seeds, per episode
-    names = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names
-    picked = {engine.h.option_names[o]: {(names[k] if names else str(k)): round(float(v), 3)
+    kinds = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names
+    picked = {engine.h.option_names[o]: {(kinds[k] if kinds else str(k)): round(float(v), 3)
                                          for k, v in enumerate(gains[o]) if v >= 0.005}
               for o in range(gains.shape[0]) if gains[o].sum() >= 0.005}
     report = {"run_dir": str(args.run_dir), "policy": args.policy, "episodes": args.episodes,
