@@ -66,27 +66,26 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
         def body(c):
             carry, key, done, ret, success, length, t, gains, on_top, last_top = c
             key, k = jax.random.split(key)
-            before, top = _inventory(carry.env_state), jax.vmap(stack_top)(carry.stack)
+            before = _inventory(carry.env_state)
+            top = jnp.maximum(jax.vmap(stack_top)(carry.stack), 0)
             carry, _, ends = runner.tick(carry, k, None, bank, controls)  # nobody learns
             if before is not None:
                 counted = (~ends.reset & ~done)[:, None]
                 gain = jnp.where(counted, jnp.maximum(_inventory(carry.env_state) - before, 0), 0)
-                gains = gains + jax.nn.one_hot(jnp.maximum(top, 0), O).T @ gain
+                gains = gains + jax.nn.one_hot(top, O).T @ gain
             first = ends.finished & ~done
-            top_hot = jax.nn.one_hot(jnp.maximum(top, 0), O, dtype=jnp.int32)
-            on_top = on_top + jnp.where(done[:, None], 0, top_hot)
+            on_top = on_top + jnp.where(done[:, None], 0, jax.nn.one_hot(top, O, dtype=jnp.int32))
             return (carry, key, done | ends.finished, jnp.where(first, ends.ret, ret),
                     jnp.where(first, ends.success, success), jnp.where(first, t + 1, length),
-                    t + 1, gains, on_top, jnp.where(done, last_top, jnp.maximum(top, 0)))
+                    t + 1, gains, on_top, jnp.where(done, last_top, top))
 
         inv = _inventory(carry.env_state)
         gains = jnp.zeros((O, 0 if inv is None else inv.shape[-1]), jnp.float32)
         init = (carry, key, jnp.zeros((num_envs,), bool), zeros, zeros,
                 jnp.zeros((num_envs,), jnp.int32), jnp.asarray(0), gains,
                 jnp.zeros((num_envs, O), jnp.int32), jnp.zeros((num_envs,), jnp.int32))
-        out = jax.lax.while_loop(cond, body, init)
-        done, ret, success, length, gains, on_top, last_top = (out[2], out[3], out[4], out[5],
-                                                               out[7], out[8], out[9])
+        _, _, done, ret, success, length, _, gains, on_top, last_top = jax.lax.while_loop(
+            cond, body, init)
         return ret, success, length, done, gains / num_envs, on_top, last_top
 
     return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, None)))
@@ -100,8 +99,10 @@ def where_time_goes(on_top, last_top, success, done, names) -> dict:
     full = done & (success >= 1.0)
 
     def ticks(mask):
-        return ({n: round(float(on_top[mask, o].mean()), 1) for o, n in enumerate(names)
-                 if on_top[mask, o].mean() >= 0.05} if mask.any() else None)
+        if not mask.any():
+            return None
+        means = on_top[mask].mean(0)
+        return {n: round(float(m), 1) for n, m in zip(names, means) if m >= 0.05}
 
     short = ~full
     ended = collections.Counter(names[o] for o in last_top[short].tolist())
