@@ -1,8 +1,8 @@
 """Where a trained hierarchy's teleport-free episodes end: per seed, the share with a
 positive return, the return's distribution, episode lengths, episodes still running
-at the tick cap, the ticks each option spends on top of the stack, and which option
-was on top when an episode ended short of full success (any environment: where a
-hierarchy loses its episodes).
+at the tick cap, the ticks each option spends on top of the stack, which option
+was on top when an episode ended short of full success, and what each deciding option
+chose (any environment: where a hierarchy loses its episodes, and which choice loops).
 
     python benchmarks/diagnose_hierarchy.py RUN_DIR [--episodes 1024] [--policy sample]
         [--max-ticks 2000] [--partial] [--json OUT.json]
@@ -48,10 +48,11 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     state has an inventory, the units of each item gained per option [O, K] (summed over
     first episodes; a gain counts for the option on top of the stack when the tick starts,
     so a call's first step counts for its caller; an episode's last step is not seen);
-    the ticks of each first episode with each option on top [B, O]; and the option on top
-    in each first episode's last tick [B]."""
+    the ticks of each first episode with each option on top [B, O]; the option on top
+    in each first episode's last tick [B]; and how often the option on top chose each
+    action where it decided [B, O, A] (the tick's own pick: the same keys as ``tick``)."""
     runner = engine.runner
-    O = engine.h.num_options
+    O, A = engine.h.num_options, engine.h.num_actions
 
     def one_seed(key, bank, learned, temperature):
         controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
@@ -64,10 +65,11 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             return ~c[2].all() & (c[6] < max_ticks)
 
         def body(c):
-            carry, key, done, ret, success, length, t, gains, on_top, last_top = c
+            carry, key, done, ret, success, length, t, gains, on_top, last_top, chosen = c
             key, k = jax.random.split(key)
             before = _inventory(carry.env_state)
             top = jnp.maximum(jax.vmap(stack_top)(carry.stack), 0)
+            chosen = chosen + jnp.where(done[:, None, None], 0, top_choice(carry, k, top))
             carry, _, ends = runner.tick(carry, k, None, bank, controls)  # nobody learns
             if before is not None:
                 counted = (~ends.reset & ~done)[:, None]
@@ -77,25 +79,41 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             on_top = on_top + jnp.where(done[:, None], 0, jax.nn.one_hot(top, O, dtype=jnp.int32))
             return (carry, key, done | ends.finished, jnp.where(first, ends.ret, ret),
                     jnp.where(first, ends.success, success), jnp.where(first, t + 1, length),
-                    t + 1, gains, on_top, jnp.where(done, last_top, top))
+                    t + 1, gains, on_top, jnp.where(done, last_top, top), chosen)
+
+        def top_choice(carry, k, top):
+            """int32 [B, O, A]: one-hot of the top option's pick where it decides now,
+            computed as ``tick`` does (its split of ``k``; teleports are off)."""
+            k_act, k_frozen = jax.random.split(k, 6)[:2]
+            deciding = runner.deciding(learned, False)
+            callable_ = runner.callable_options(deciding, controls.learner, False)
+            _, _, frozen, _ = runner._choices(carry, None, bank, controls, callable_, k_act,
+                                              k_frozen)
+            pick = jnp.take_along_axis(frozen, top[:, None], 1)[:, 0]
+            decides = deciding[top]
+            return (jax.nn.one_hot(top, O, dtype=jnp.int32)[:, :, None]
+                    * (jax.nn.one_hot(pick, A, dtype=jnp.int32) * decides[:, None])[:, None, :])
 
         inv = _inventory(carry.env_state)
         gains = jnp.zeros((O, 0 if inv is None else inv.shape[-1]), jnp.float32)
         init = (carry, key, jnp.zeros((num_envs,), bool), zeros, zeros,
                 jnp.zeros((num_envs,), jnp.int32), jnp.asarray(0), gains,
-                jnp.zeros((num_envs, O), jnp.int32), jnp.zeros((num_envs,), jnp.int32))
-        _, _, done, ret, success, length, _, gains, on_top, last_top = jax.lax.while_loop(
-            cond, body, init)
-        return ret, success, length, done, gains / num_envs, on_top, last_top
+                jnp.zeros((num_envs, O), jnp.int32), jnp.zeros((num_envs,), jnp.int32),
+                jnp.zeros((num_envs, O, A), jnp.int32))
+        _, _, done, ret, success, length, _, gains, on_top, last_top, chosen = \
+            jax.lax.while_loop(cond, body, init)
+        return ret, success, length, done, gains / num_envs, on_top, last_top, chosen
 
     return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, None)))
 
 
-def where_time_goes(on_top, last_top, success, done, names) -> dict:
+def where_time_goes(on_top, last_top, chosen, success, done, names, action_names) -> dict:
     """Mean ticks per episode with each option on top, in fully successful episodes and
-    in the others, and the share of the others that ended (or hit the cap) with each
-    option on top."""
-    on_top, last_top, success, done = (np.asarray(x) for x in (on_top, last_top, success, done))
+    in the others; the share of the others that ended (or hit the cap) with each option
+    on top; and the mean number of times per episode each deciding option chose each of
+    its children, in both kinds of episode (where a loop is: which choice repeats)."""
+    on_top, last_top, chosen, success, done = (np.asarray(x) for x in
+                                               (on_top, last_top, chosen, success, done))
     full = done & (success >= 1.0)
 
     def ticks(mask):
@@ -104,11 +122,20 @@ def where_time_goes(on_top, last_top, success, done, names) -> dict:
         means = on_top[mask].mean(0)
         return {n: round(float(m), 1) for n, m in zip(names, means) if m >= 0.05}
 
+    def choices(mask):
+        if not mask.any():
+            return None
+        means = chosen[mask].mean(0)  # [O, A]
+        return {names[o]: {action_names[a]: round(float(means[o, a]), 1)
+                           for a in np.flatnonzero(means[o] >= 0.05)}
+                for o in range(means.shape[0]) if means[o].sum() >= 0.05}
+
     short = ~full
     ended = collections.Counter(names[o] for o in last_top[short].tolist())
     return {"ticks_on_top_full_success": ticks(full), "ticks_on_top_others": ticks(short),
             "top_at_end_of_others": {k: round(v / max(short.sum(), 1), 3)
-                                     for k, v in ended.most_common()}}
+                                     for k, v in ended.most_common()},
+            "choices_full_success": choices(full), "choices_others": choices(short)}
 
 
 def summarize(ret, success, length, done) -> dict:
@@ -150,8 +177,10 @@ def main(argv=None) -> int:
     out = program(keys, bank, learned, eval_temperatures(args.policy, engine.h.num_options,
                                                            engine.cfg.option_temperature))
     names = list(engine.h.option_names)
+    action_names = list(engine.h.primitive_names[:engine.h.num_primitives]) + names[1:]
     per_seed = [summarize(*(x[i] for x in out[:4]))
-                | where_time_goes(out[5][i], out[6][i], out[1][i], out[3][i], names)
+                | where_time_goes(out[5][i], out[6][i], out[7][i], out[1][i], out[3][i], names,
+                                  action_names)
                 for i in range(len(seeds))]
     gains = np.asarray(out[4]).mean(0)  # [O, K], mean over seeds, per episode
     kinds = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names
