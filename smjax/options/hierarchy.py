@@ -53,6 +53,10 @@ class Hierarchy:
     #: ``success(state, params)`` -> a scalar float in [0, 1] or a bool (None: the
     #: environment's ``info["success"]``, else the episode return).
     success: Callable[[Any, Any], Any] | None = None
+    #: The best task success an episode can reach (1.0: no lower bound is known). Craft's
+    #: success is its return, and a task whose recipe leaves items over can never reach 1
+    #: (make_bench: 0.8); the trainer keeps a root threshold below it (TrainConfig.ceiling_fraction).
+    success_ceiling: float = 1.0
     #: option name -> scripted policy ``policy(key, state, params, mask) -> int`` child
     #: index (pure and jittable; see the module docstring). None: no scripted policies.
     policies: Mapping[str, Callable[[Any, Any, Any, Any], Any]] | None = None
@@ -75,6 +79,10 @@ class Hierarchy:
                 f"success must be a function success(state, params) -> float in [0, 1] or "
                 f"bool, got {type(self.success).__name__}"
             )
+        ceiling = self.success_ceiling
+        if isinstance(ceiling, bool) or not isinstance(ceiling, (int, float)) \
+                or not 0 < ceiling <= 1:
+            raise HierarchyError(f"success_ceiling must be a number in (0, 1], got {ceiling!r}")
         if self.task not in self.children:
             raise HierarchyError(
                 f"hierarchy for task {self.task!r} declares no children for the task itself; "
@@ -253,7 +261,8 @@ class Hierarchy:
         primitives = [p for p in self.primitive_names if self.uses_primitives]
         return Hierarchy(task=self.task, children={self.task: primitives + leaves},
                          templates={n: self.templates[n] for n in leaves},
-                         primitive_names=self.primitive_names, success=self.success)
+                         primitive_names=self.primitive_names, success=self.success,
+                         success_ceiling=self.success_ceiling)
 
     def describe(self) -> str:
         lines = []
@@ -269,8 +278,8 @@ class Hierarchy:
 def declare(env, task: str, children: Mapping[str, Sequence[str]], *,
             templates: Mapping[str, OptionTemplate] | Sequence[OptionTemplate] | None = None,
             success: Callable[[Any, Any], Any] | None = None,
-            policies: Mapping[str, Callable[[Any, Any, Any, Any], Any]] | None = None
-            ) -> Hierarchy:
+            policies: Mapping[str, Callable[[Any, Any, Any, Any], Any]] | None = None,
+            success_ceiling: float = 1.0) -> Hierarchy:
     """Build a validated hierarchy over an environment's templates and primitive actions.
 
     ``templates``: templates of your own (a name -> template mapping or a list), added to
@@ -279,7 +288,8 @@ def declare(env, task: str, children: Mapping[str, Sequence[str]], *,
     float in [0, 1] or a bool), where it is not the environment's ``info["success"]`` or
     the episode return.
     ``policies``: option name -> scripted policy ``policy(key, state, params, mask)`` ->
-    the index of the child to call (see the module docstring)."""
+    the index of the child to call (see the module docstring).
+    ``success_ceiling``: the best task success an episode can reach, where it is below 1."""
     own = dict(env.templates())
     if templates is not None:
         items = templates.values() if isinstance(templates, Mapping) else templates
@@ -299,6 +309,7 @@ def declare(env, task: str, children: Mapping[str, Sequence[str]], *,
         primitive_names=tuple(env.primitive_action_names),
         success=success,
         policies=policies,
+        success_ceiling=success_ceiling,
     )
 
 

@@ -41,6 +41,21 @@ def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
     return name, chosen
 
 
+def reachable_root_threshold(cfg: TrainConfig, h: Hierarchy) -> TrainConfig:
+    """``cfg`` with the root level's threshold lowered to ``cfg.ceiling_fraction`` of the
+    task's best success where it is at or above that best (``Hierarchy.success_ceiling``):
+    such a level could only end with every exploring episode perfect, and would spend its
+    whole budget (Craft's make_bench, best 0.8: 40,000 episodes). Written into
+    ``cfg.levels`` so results and checkpoints record the threshold the level used."""
+    ceiling = float(h.success_ceiling)
+    if cfg.for_level(h.task).threshold < ceiling - 1e-9:
+        return cfg
+    levels = dict(cfg.levels)
+    levels[h.task] = dict(levels.get(h.task, {}),
+                          threshold=round(cfg.ceiling_fraction * ceiling, 6))
+    return cfg.replace(levels=levels)
+
+
 def declared_identity(h: Hierarchy) -> dict:
     """What a resume must find again of a declared hierarchy (its shape and template names;
     the templates' functions cannot be compared)."""

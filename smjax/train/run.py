@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,8 @@ from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_d
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.loop import HierarchyTrainer, NonFiniteError
-from smjax.train.plans import declared_identity, plan_levels, resolve_hierarchy
+from smjax.train.plans import (declared_identity, plan_levels, reachable_root_threshold,
+                               resolve_hierarchy)
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.results import build_results, write_results, write_sweep
@@ -145,6 +147,13 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
         env, env_params = task
     agent = make_learner(env, env_params, cfg)
     hierarchy_name, hierarchy = resolve_hierarchy(env, cfg, given)
+    reachable = reachable_root_threshold(cfg, hierarchy)
+    if reachable is not cfg and progress and dist.is_writer():
+        print(f"{env.name}: the best task success is {hierarchy.success_ceiling:g}, so the root "
+              f"level ends at {reachable.levels[hierarchy.task]['threshold']:g} (ceiling_fraction "
+              f"{cfg.ceiling_fraction:g} of it), not {cfg.for_level(hierarchy.task).threshold:g}",
+              file=sys.stderr)
+    cfg = reachable
     identity = run_identity(env.name, cfg, seeds, env_overrides)
     if given is not None:  # its shape must match on resume
         identity["hierarchy_declared"] = declared_identity(given)

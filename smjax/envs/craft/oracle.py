@@ -191,6 +191,14 @@ def solvable_items() -> dict[str, tuple[int, int] | None]:
     return out
 
 
+def best_return(task: str) -> float:
+    """The best return (Craft's task success) of ``task``: 1 less 0.1 per item the plan
+    leaves held beside the goal (make_bench: 0.8; multi-fire USE makes some leftovers
+    unavoidable), or 1.0 where the plan fails (no lower bound known)."""
+    res = solvable_items()[C.TASKS[task]]
+    return 1.0 if res is None else round(max(0.0, 1.0 - 0.1 * res[1]), 6)
+
+
 # --------------------------------------------------------------------------------------
 # JAX: target, navigation, decision
 

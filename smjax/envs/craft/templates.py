@@ -17,6 +17,7 @@ import numpy as np
 
 from smjax.core.sampling import choose_uniform
 from smjax.envs.craft import constants as C
+from smjax.envs.craft.oracle import best_return
 from smjax.envs.craft.types import CraftParams, CraftState
 from smjax.options import Hierarchy, OptionTemplate, Parametric, declare
 
@@ -182,5 +183,5 @@ def make_hierarchies(env, task: str) -> dict[str, Hierarchy]:
         else:  # flat: the task over the primitive actions
             out[name] = next(iter(out.values())).flattened()
             continue
-        out[name] = declare(env, task, children)
+        out[name] = declare(env, task, children, success_ceiling=best_return(task))
     return out
