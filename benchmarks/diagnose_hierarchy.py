@@ -59,6 +59,8 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
                             temperature=temperature, acts_frozen=True)  # nobody learns
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
+        deciding = runner.deciding(learned, False)  # fixed for the whole run (top_choice)
+        callable_ = runner.callable_options(deciding, controls.learner, False)
         zeros = jnp.zeros((num_envs,), jnp.float32)
 
         def cond(c):
@@ -85,8 +87,6 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             """int32 [B, O, A]: one-hot of the top option's pick where it decides now,
             computed as ``tick`` does (its split of ``k``; teleports are off)."""
             k_act, k_frozen = jax.random.split(k, 6)[:2]
-            deciding = runner.deciding(learned, False)
-            callable_ = runner.callable_options(deciding, controls.learner, False)
             _, _, frozen, _ = runner._choices(carry, None, bank, controls, callable_, k_act,
                                               k_frozen)
             pick = jnp.take_along_axis(frozen, top[:, None], 1)[:, 0]

@@ -182,20 +182,23 @@ def plan() -> tuple[dict[int, tuple[int, ...]], dict[int, dict[int, int]]]:
 ORDERS, COUNTS = plan()
 
 
+def _plan_outcome(name: str) -> tuple[int, int] | None:
+    """(USEs, other items left held) of the plan for item ``name`` from nothing, or None."""
+    goal = C.KIND_ID[name]
+    res = _simulate(goal, ORDERS, COUNTS)
+    return None if res is None else (res[0], int(res[1].sum() - res[1][goal]))
+
+
 def solvable_items() -> dict[str, tuple[int, int] | None]:
     """item -> (USEs, other items left held) of the plan from nothing, or None if it fails."""
-    out = {}
-    for name in C.ITEMS:
-        res = _simulate(C.KIND_ID[name], ORDERS, COUNTS)
-        out[name] = None if res is None else (res[0], int(res[1].sum() - res[1][C.KIND_ID[name]]))
-    return out
+    return {name: _plan_outcome(name) for name in C.ITEMS}
 
 
 def best_return(task: str) -> float:
     """The best return (Craft's task success) of ``task``: 1 less 0.1 per item the plan
     leaves held beside the goal (make_bench: 0.8; multi-fire USE makes some leftovers
     unavoidable), or 1.0 where the plan fails (no lower bound known)."""
-    res = solvable_items()[C.TASKS[task]]
+    res = _plan_outcome(C.TASKS[task])
     return 1.0 if res is None else round(max(0.0, 1.0 - 0.1 * res[1]), 6)
 
 

@@ -174,7 +174,7 @@ def default_hierarchy_name(task: str) -> str:
 
 def make_hierarchies(env, task: str) -> dict[str, Hierarchy]:
     """name -> Hierarchy for ``task``, in ``hierarchy_names`` order (default first)."""
-    out = {}
+    out, best = {}, best_return(task)
     for name in hierarchy_names(task):
         if name == "paper":
             children = PAPER_CHILDREN[task]
@@ -183,5 +183,5 @@ def make_hierarchies(env, task: str) -> dict[str, Hierarchy]:
         else:  # flat: the task over the primitive actions
             out[name] = next(iter(out.values())).flattened()
             continue
-        out[name] = declare(env, task, children, success_ceiling=best_return(task))
+        out[name] = declare(env, task, children, success_ceiling=best)
     return out
