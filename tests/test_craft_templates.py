@@ -19,8 +19,14 @@ ENV, PARAMS = smjax.make("craft/get_gem", observation="none")
 TEMPLATES = ENV.templates()
 
 
+COUNTED = {"give_iron_x2": "iron", "give_stick_x2": "stick", "give_wood_x2": "wood"}
+
+
 def test_one_template_per_item_with_caps_and_durations():
-    assert set(TEMPLATES) == {f"give_{i}" for i in C.ITEMS} and len(TEMPLATES) == 24
+    assert set(TEMPLATES) == {f"give_{i}" for i in C.ITEMS} | set(COUNTED) and len(TEMPLATES) == 27
+    for name, item in COUNTED.items():  # two units: twice the cap and the nominal duration
+        assert TEMPLATES[name].k_max == 2 * C.STEP_CAP[item]
+        assert TEMPLATES[name].nominal_steps == 2 * C.NOMINAL_STEPS[item]
     for item in C.ITEMS:
         tpl = TEMPLATES[f"give_{item}"]
         assert tpl.k_max == C.STEP_CAP[item] and tpl.teleport is not None
@@ -86,10 +92,10 @@ def test_crafted_teleport_then_use_follows_the_multi_fire_rules():
 
 
 def test_impossible_teleport_is_a_noop_step():
-    # Gold on an island: no empty neighbour, so give_gold cannot stand next to it.
+    # A map without wood: give_wood has nowhere to stand.
     env, params = smjax.make("craft/get_gold", observation="none")
-    state, params = smjax.envs.craft.from_ascii(smjax.envs.craft.REFERENCE_GOLD_MAP, "get_gold")
-    tpl = env.templates()["give_gold"]
+    state, params = from_ascii(smjax.envs.craft.REFERENCE_GOLD_MAP.replace("w", "."), "get_gold")
+    tpl = env.templates()["give_wood"]
     jumped, action = tpl.teleport(jax.random.PRNGKey(0), state, params)
     assert int(action) == C.NOOP
     for a, b in zip(jax.tree.leaves(jumped), jax.tree.leaves(state)):
@@ -103,10 +109,77 @@ def test_impossible_teleport_is_a_noop_step():
     state2, params2 = from_ascii(no_factory, "get_gold")
     jumped, action = env.templates()["give_bridge"].teleport(jax.random.PRNGKey(0), state2, params2)
     assert int(action) == C.NOOP and inventory_dict(jumped) == {}
-    # Once a bridge crossed the water the gold can be reached.
-    state3 = state.replace(grid=state.grid.at[6, 2].set(C.EMPTY))
-    _, after3, *_ = teleport_step(env, tpl, jax.random.PRNGKey(1), state3, params)
-    assert inventory_dict(after3) == {"gold": 1}
+    # give_wood_x2 on it adds nothing either (no unit is promised without the USE's)
+    jumped, action = env.templates()["give_wood_x2"].teleport(jax.random.PRNGKey(0), state, params)
+    assert int(action) == C.NOOP and inventory_dict(jumped) == {}
+
+
+@pytest.mark.parametrize("world_task", ["get_gold", "make_goldarrow", "get_gem"])
+def test_treasure_teleport_crosses_its_barrier(world_task):
+    # Gold (gem) behind water (stone): give_X stands in a barrier cell next to it (clearing
+    # that cell, as the learned option's bridge or axe would) or in an open one, then grabs it.
+    treasure = "gem" if world_task == "get_gem" else "gold"
+    barrier = C.STONE if treasure == "gem" else C.WATER
+    _, params, tpl, states, jumped, actions, after = _run_teleports(f"give_{treasure}", world_task)
+    assert np.all(np.asarray(actions) == C.USE)
+    for i in range(states.grid.shape[0]):
+        grid, new = np.asarray(states.grid[i]), np.asarray(after.grid[i])
+        x, y = np.asarray(after.pos[i])  # (the USE leaves the stand cell as it is)
+        dx, dy = C.DIRECTION_DELTAS[int(after.direction[i])]
+        assert grid[x + dx, y + dy] == C.KIND_ID[treasure] and grid[x, y] in (C.EMPTY, barrier)
+        changed = set(zip(*np.nonzero(grid != new)))
+        assert changed == {(x, y), (x + dx, y + dy)} - ({(x, y)} if grid[x, y] == C.EMPTY else set())
+        assert new[x, y] == C.EMPTY and new[x + dx, y + dy] == C.EMPTY
+        assert inventory_dict(jax.tree.map(lambda a: a[i], after)) == {treasure: 1}
+    # From the reference gold map (no open neighbour) every stand cell is a water cell.
+    state, params = from_ascii(smjax.envs.craft.REFERENCE_GOLD_MAP, "get_gold")
+    picks = jax.vmap(TEMPLATES["give_gold"].teleport, in_axes=(0, None, None))(
+        jax.random.split(jax.random.PRNGKey(3), 200), state, params)[0].pos
+    assert {tuple(p) for p in np.asarray(picks).tolist()} == {(5, 1), (7, 1), (6, 2)}
+
+
+@pytest.mark.parametrize("name,held", [("give_wood_x2", 0), ("give_wood_x2", 1),
+                                       ("give_iron_x2", 0), ("give_iron_x2", 1),
+                                       ("give_stick_x2", 0), ("give_stick_x2", 1)])
+def test_counted_teleport_holds_the_promised_count(name, held):
+    item = COUNTED[name]
+    _, params, tpl, states, jumped, actions, after = _run_teleports(
+        name, "make_flag", 16, holding={item: held} if held else None)
+    for i in range(16):
+        before_i, after_i = (jax.tree.map(lambda a: a[i], t) for t in (states, after))
+        assert bool(tpl.initiation(before_i, params))
+        assert inventory_dict(after_i) == {item: 2}
+        assert bool(tpl.satisfied(after_i, params)) and not bool(tpl.initiation(after_i, params))
+        # a primitive's second unit comes off the map (one cell fewer), a stick's from nothing
+        cells = C.KIND_ID[item] if item != "stick" else C.WORKSHOPS[1]
+        fewer = np.sum(np.asarray(before_i.grid) == cells) - np.sum(np.asarray(after_i.grid) == cells)
+        assert fewer == (1 if item != "stick" else 0)
+
+
+def test_recipe_children_promise_what_one_use_needs():
+    # In every recipe hierarchy, holding what an option's give children promise and USEing
+    # its workshop yields the option's item (multi-fire USE included).
+    from smjax.envs.craft.oracle import _fire_np
+    for task in C.TASKS:
+        h = smjax.make(f"craft/{task}", observation="none")[0].hierarchies()["recipe"]
+        for option, kids in h.children.items():
+            item, count = (C.TASKS[option], 1) if option in C.TASKS else C.give_target(option)
+            if item not in C.CRAFTED or count > 1:
+                continue
+            inv = np.zeros(C.NUM_KINDS, np.int64)
+            for kid in kids:
+                if kid.startswith("give_"):
+                    what, n = C.give_target(kid)
+                    inv[C.KIND_ID[what]] = n
+            assert _fire_np(inv, C.WORKSHOP_OF[item])[C.KIND_ID[item]] >= 1, (task, option, kids)
+    flag = smjax.make("craft/make_flag")[0].hierarchies()["recipe"]
+    prims = tuple(C.ACTION_NAMES)
+    assert flag.children["make_flag"] == ("give_stick_x2", "give_cloth", "give_iron_x2") + prims
+    assert flag.children["give_stick_x2"] == ("give_stick", "give_wood") + prims
+    assert [C.give_target(n) for n in ("give_wood", "give_iron_x2")] == [("wood", 1), ("iron", 2)]
+    for bad in ("give_cake", "take_wood", "give_wood_xx"):
+        with pytest.raises(ValueError, match="not a craft give template"):
+            C.give_target(bad)
 
 
 def test_teleport_picks_uniformly_among_all_stand_cells():
@@ -165,7 +238,7 @@ def test_hierarchies_per_task():
     assert default_hierarchy_name("make_bow") == "recipe"
     bow = smjax.make("craft/make_bow")[0].hierarchies()["recipe"]
     assert bow.children["make_bow"][:2] == ("give_rope", "give_bundle")
-    assert bow.children["give_bundle"][:2] == ("give_wood", "give_grass")
+    assert bow.children["give_bundle"][:2] == ("give_wood_x2", "give_grass")
     assert bow.children["give_grass"] == tuple(prims)
     with pytest.raises(ValueError, match="unknown craft task"):
         default_hierarchy_name("make_cake")

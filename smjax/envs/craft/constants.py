@@ -148,6 +148,19 @@ def world_kind(task: str) -> str:
     return "plain"
 
 
+def give_name(item: str, count: int = 1) -> str:
+    """The template promising ``count`` of ``item``: ``give_wood``, ``give_wood_x2``."""
+    return f"give_{item}" if count == 1 else f"give_{item}_x{count}"
+
+
+def give_target(name: str) -> tuple[str, int]:
+    """(item, count) a ``give_`` template name promises: inverse of ``give_name``."""
+    item, _, count = name[len("give_"):].partition("_x")
+    if not name.startswith("give_") or item not in ITEMS or (count and not count.isdigit()):
+        raise ValueError(f"not a craft give template name: {name!r}")
+    return item, int(count or 1)
+
+
 def check_task(task: str) -> str:
     if not isinstance(task, str) or task not in TASKS:
         raise ValueError(f"unknown craft task {task!r}; valid tasks: {', '.join(TASKS)}")

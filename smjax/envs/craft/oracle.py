@@ -189,6 +189,16 @@ def _plan_outcome(name: str) -> tuple[int, int] | None:
     return None if res is None else (res[0], int(res[1].sum() - res[1][goal]))
 
 
+def ingredient_counts(item: str) -> dict[str, int]:
+    """Units of each direct ingredient to hold at the workshop so that one USE yields
+    ``item`` (in recipe order; a flag needs 2 sticks and 2 iron, as the axe recipe fires
+    first and eats one of each); a treasure: its tool, 1; a primitive: none."""
+    kind = C.KIND_ID[item]
+    if kind in COUNTS:
+        return {C.KIND_NAMES[i]: n for i, n in COUNTS[kind].items()}
+    return {i: 1 for i in C.ingredients(item)}
+
+
 def solvable_items() -> dict[str, tuple[int, int] | None]:
     """item -> (USEs, other items left held) of the plan from nothing, or None if it fails."""
     return {name: _plan_outcome(name) for name in C.ITEMS}
@@ -330,12 +340,13 @@ def oracle_action(state: CraftState, params: CraftParams | None = None, goal_ite
     return _decide_traced(state, params.goal)[0]
 
 
-def _decide_traced(state: CraftState, item_id: jax.Array):
-    """``oracle_decide`` for a traced item kind id (one field, target selected by id)."""
+def _decide_traced(state: CraftState, item_id: jax.Array, count: jax.Array | int = 1):
+    """``oracle_decide`` for a traced item kind id (one field, target selected by id),
+    done once ``count`` of it are held."""
     codes = jnp.stack([target_code(state, C.KIND_ID[name]) for name in C.ITEMS])
     ids = jnp.asarray([C.KIND_ID[name] for name in C.ITEMS], jnp.int32)
     code = codes[jnp.argmax(ids == item_id)]
-    grid_done = state.inventory[item_id] > 0
+    grid_done = state.inventory[item_id] >= count
     action, info = _decide(state, code, 0)  # item 0 (empty) is never held: no 'done' here
     action = jnp.where(grid_done, C.DOWN, action).astype(jnp.int32)
     info = dict(info, stuck=info["stuck"] & ~grid_done)
@@ -347,15 +358,16 @@ def _decide_traced(state: CraftState, item_id: jax.Array):
 
 
 def _give_fn(key: jax.Array, state: CraftState, params: CraftParams, data: dict) -> jax.Array:
-    return _decide_traced(state, data["item_id"])[0]
+    return _decide_traced(state, data["item_id"], data["count"])[0]
 
 
-def give_controller(item: str) -> Callable:
-    """A ``Parametric`` controller (key, state, params) -> action obtaining one ``item``,
-    usable as ``OptionTemplate.controller`` (one family for every give_X)."""
+def give_controller(item: str, count: int = 1) -> Callable:
+    """A ``Parametric`` controller (key, state, params) -> action obtaining ``item`` until
+    ``count`` are held, usable as ``OptionTemplate.controller`` (one family for every
+    give_X)."""
     from smjax.options import Parametric
 
-    return Parametric(_give_fn, {"item_id": np.int32(_item_id(item))})
+    return Parametric(_give_fn, {"item_id": np.int32(_item_id(item)), "count": np.int32(count)})
 
 
 def oracle_templates(env) -> dict:
@@ -363,7 +375,7 @@ def oracle_templates(env) -> dict:
     import dataclasses
 
     return {name: dataclasses.replace(tpl, teleport=None,
-                                      controller=give_controller(name[len("give_"):]))
+                                      controller=give_controller(*C.give_target(name)))
             for name, tpl in env.templates().items()}
 
 

@@ -1,4 +1,5 @@
-"""Craft's option templates (``give_<item>``) and hierarchies (flat, recipe, paper).
+"""Craft's option templates (``give_<item>``, ``give_<item>_x<n>``) and hierarchies (flat,
+recipe, paper).
 
 ``give_X`` promises "X is held". Its teleport is the reference's: among the empty
 4-neighbours of every cell holding X (a crafted X: of its workshop) pick one (stand cell,
@@ -6,6 +7,19 @@ facing) pair uniformly, stand there facing the target, for a crafted X add one X
 inventory first, and return USE for the caller to execute in the same tick (so the call is
 one environment step). With no such cell the state is returned unchanged with NOOP.
 A stand cell next to two targets is two pairs, as in the reference's list of candidates.
+
+Two additions of smjax's (docs/environments.md, Craft templates):
+
+* ``give_X_xN`` promises "N of X are held" (initiable while fewer are). Multi-fire USE
+  makes some recipes need two units of an ingredient (``oracle.ingredient_counts``: a flag
+  needs 2 sticks and 2 iron, since the axe recipe fires first and eats one of each), and
+  ``give_X``, not initiable once one X is held, cannot fetch the second. Its teleport adds
+  the missing units (all but the one its USE picks up, for a primitive).
+* A treasure behind its barrier (gold in water, a gem in stone): the barrier cells next to
+  it are stand cells too, and the teleport clears the one it stands in, which is where
+  the learned ``give_gold`` ends (it crosses the water with a bridge). By the reference's
+  rule the teleport does nothing until the water is crossed, so a task with gold as an
+  ingredient (make_goldarrow) left its root no way to get the gold.
 """
 from __future__ import annotations
 
@@ -17,22 +31,23 @@ import numpy as np
 
 from smjax.core.sampling import choose_uniform
 from smjax.envs.craft import constants as C
-from smjax.envs.craft.oracle import best_return
+from smjax.envs.craft.oracle import best_return, ingredient_counts
 from smjax.envs.craft.types import CraftParams, CraftState
 from smjax.options import Hierarchy, OptionTemplate, Parametric, declare
 
 N = C.GRID_SIZE
 
 
-def stand_candidates(grid: jax.Array, target_kind: int) -> jax.Array:
-    """bool [4, 12, 12]: standing at (x, y) facing direction d looks at a ``target_kind`` cell."""
+def stand_candidates(grid: jax.Array, target_kind: int, barrier_kind: int = C.EMPTY) -> jax.Array:
+    """bool [4, 12, 12]: standing at (x, y) facing direction d looks at a ``target_kind``
+    cell, (x, y) being empty or of ``barrier_kind`` (the default, empty: empty cells only)."""
     target = grid == target_kind
-    empty = grid == C.EMPTY
+    standable = (grid == C.EMPTY) | (grid == barrier_kind)
     pad = jnp.pad(target, 1)  # pad[x + 1, y + 1] == target[x, y]
     facing = []
     for dx, dy in C.DIRECTION_DELTAS:
         facing.append(jax.lax.slice(pad, (1 + dx, 1 + dy), (1 + dx + N, 1 + dy + N)))
-    return jnp.stack(facing) & empty[None]
+    return jnp.stack(facing) & standable[None]
 
 
 def give_teleport(key: jax.Array, state: CraftState, params: CraftParams, data: dict):
@@ -41,34 +56,52 @@ def give_teleport(key: jax.Array, state: CraftState, params: CraftParams, data: 
     One function for the whole family (``Parametric``), so a batch in which different
     environments call different give_X templates evaluates it once, not once per X.
     """
-    cand = stand_candidates(state.grid, data["target_kind"]).reshape(-1)
+    cand = stand_candidates(state.grid, data["target_kind"], data["barrier_kind"]).reshape(-1)
     index, count = choose_uniform(key, cand)
     direction, cell = index // (N * N), index % (N * N)
     possible = count > 0
-    add = (possible & data["crafted"]).astype(state.inventory.dtype)
+    dtype = state.inventory.dtype
+    held = state.inventory[data["item_id"]]
+    # a primitive's USE picks one unit up; the rest of the promised count is added here
+    missing = jnp.maximum(data["count"].astype(dtype) - held - data["picked"].astype(dtype), 0)
+    # the stand cell, if a barrier, is cleared (compare-and-select, as in dynamics)
+    flat = state.grid.reshape(-1)
+    cleared = jnp.where((jnp.arange(N * N) == cell) & possible, jnp.uint8(C.EMPTY), flat)
     jumped = state.replace(
+        grid=cleared.reshape(N, N),
         pos=jnp.where(possible, jnp.stack([cell // N, cell % N]), state.pos).astype(jnp.int32),
         direction=jnp.where(possible, direction, state.direction).astype(jnp.int32),
-        inventory=state.inventory.at[data["item_id"]].add(add),
+        inventory=state.inventory.at[data["item_id"]].add(jnp.where(possible, missing, 0)),
     )
     action = jnp.where(possible, C.USE, C.NOOP).astype(jnp.int32)
     return jumped, action
 
 
-def teleport_data(item: str) -> dict:
-    """Per-item data of ``give_teleport``: the item, the kind to stand next to, crafted?"""
+def teleport_data(item: str, count: int = 1) -> dict:
+    """Per-template data of ``give_teleport``: the item, the kind to stand next to, the
+    barrier that may be cleared to stand there (empty: none), the count promised, and the
+    units the USE picks up (1 for a primitive)."""
     item_id = C.KIND_ID[item]
+    barrier = {"gold": C.WATER, "gem": C.STONE}.get(item, C.EMPTY)
     return {
         "item_id": np.int32(item_id),
         "target_kind": np.uint8(C.WORKSHOP_OF.get(item, item_id)),
-        "crafted": np.bool_(item in C.CRAFTED),
+        "barrier_kind": np.uint8(barrier),
+        "count": np.int32(count),
+        "picked": np.int32(item not in C.CRAFTED),
     }
 
 
-def _held_fn(item_id: int, held: bool) -> Callable:
+def _held_fn(item_id: int, count: int, held: bool) -> Callable:
     def fn(state: CraftState, params: CraftParams) -> jax.Array:
-        return (state.inventory[item_id] > 0) == held
+        return (state.inventory[item_id] >= count) == held
     return fn
+
+
+def counted_ingredients() -> tuple[tuple[str, int], ...]:
+    """(item, count) of every ingredient some recipe needs more than one of, at once."""
+    pairs = {(i, n) for out in C.CRAFTED for i, n in ingredient_counts(out).items() if n > 1}
+    return tuple(sorted(pairs))
 
 
 def recipe_counts(item: str) -> dict[str, int]:
@@ -111,34 +144,39 @@ def make_templates(side_cost: str = "held") -> dict[str, OptionTemplate]:
     if side_cost not in SIDE_COSTS:
         raise ValueError(f"side_cost must be one of {SIDE_COSTS}, got {side_cost!r}")
     out = {}
-    for item in C.ITEMS:
+    for item, count in [(item, 1) for item in C.ITEMS] + list(counted_ingredients()):
         item_id = C.KIND_ID[item]
-        name = f"give_{item}"
+        name = C.give_name(item, count)
         how = f"at workshop{C.WORKSHOPS.index(C.WORKSHOP_OF[item])}" if item in C.CRAFTED else ""
+        what = f"obtain one {item}" if count == 1 else f"hold {count} {item}"
         out[name] = OptionTemplate(
             name=name,
-            satisfied=_held_fn(item_id, True),
-            initiation=_held_fn(item_id, False),
-            k_max=C.STEP_CAP[item],
-            teleport=Parametric(give_teleport, teleport_data(item)),
-            nominal_steps=C.NOMINAL_STEPS[item],
-            description=f"obtain one {item} {how}".strip(),
+            satisfied=_held_fn(item_id, count, True),
+            initiation=_held_fn(item_id, count, False),
+            k_max=count * C.STEP_CAP[item],
+            teleport=Parametric(give_teleport, teleport_data(item, count)),
+            nominal_steps=count * C.NOMINAL_STEPS[item],
+            description=f"{what} {how}".strip(),
             side_cost=_side_cost_fn(item, side_cost),
         )
     return out
 
 
 def recipe_children(task: str) -> dict[str, list[str]]:
-    """task -> give_<direct ingredient> + primitives, recursively (a treasure's tool counts)."""
+    """task -> the give template of each direct ingredient, for the count one USE needs
+    (``give_wood_x2`` where two are), + primitives, recursively (a treasure's tool counts).
+    ``give_X_xN`` may call ``give_X`` for the first unit besides X's own ingredients."""
     goal = C.TASKS[task]
     children: dict[str, list[str]] = {}
 
-    def add(option: str, item: str) -> None:
-        kids = [f"give_{i}" for i in C.ingredients(item)]
-        children[option] = kids + ["primitives"]
-        for i in C.ingredients(item):
-            if f"give_{i}" not in children:
-                add(f"give_{i}", i)
+    def add(option: str, item: str, count: int = 1) -> None:
+        kids = [C.give_name(i, n) for i, n in ingredient_counts(item).items()]
+        children[option] = ([C.give_name(item)] if count > 1 else []) + kids + ["primitives"]
+        for i, n in ingredient_counts(item).items():
+            if C.give_name(i, n) not in children:
+                add(C.give_name(i, n), i, n)
+        if count > 1 and C.give_name(item) not in children:
+            add(C.give_name(item), item)
 
     add(task, goal)
     return children
