@@ -7,6 +7,7 @@ smjax/agents/smdp.py), so the rollout length only sets how often the learner upd
 from __future__ import annotations
 
 import argparse
+import json
 import importlib.util
 from pathlib import Path
 
@@ -66,3 +67,16 @@ def test_negative_rollout_is_refused():
 def test_ppo_gets_no_dqn_gradient_steps():
     cfg = FSC.level_config(3, "top-down", _args(algo="ppo"), {})
     assert "gradient_steps_per_update" not in cfg.agent
+
+
+def test_the_fetch_preset_is_the_benchmarks_recipe():
+    # configs/fetch_stack3.yaml trains what RESULTS section 24 ran through the script
+    from smjax.train.config import resolve_config
+
+    levels = {"stack": {"gamma": 0.99}, "place_0": {"threshold": 0.97},
+              "place_1": {"threshold": 0.97}, "place_2": {"threshold": 0.97}}
+    script = FSC.level_config(3, "top-down", _args(hierarchy="paper_hold_all", num_envs=128,
+                                                   max_steps=800_000, set=[f"levels={json.dumps(levels)}"]),
+                              dict(FSC.AGENT) | {"gradient_steps_per_update": 128})
+    preset = resolve_config(file=_PATH.parents[1] / "configs" / "fetch_stack3.yaml")
+    assert preset == resolve_config(script)
