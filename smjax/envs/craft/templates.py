@@ -50,46 +50,71 @@ def stand_candidates(grid: jax.Array, target_kind: int, barrier_kind: int = C.EM
     return jnp.stack(facing) & standable[None]
 
 
-def give_teleport(key: jax.Array, state: CraftState, params: CraftParams, data: dict):
-    """The teleport of every ``give_X``; ``data`` says which X (see ``teleport_data``).
-
-    One function for the whole family (``Parametric``), so a batch in which different
-    environments call different give_X templates evaluates it once, not once per X.
-    """
-    cand = stand_candidates(state.grid, data["target_kind"], data["barrier_kind"]).reshape(-1)
+def _stand(key: jax.Array, state: CraftState, data: dict, barrier_kind=C.EMPTY):
+    """A uniform (cell, facing) pair next to ``data``'s target: (cell, direction, possible)."""
+    cand = stand_candidates(state.grid, data["target_kind"], barrier_kind).reshape(-1)
     index, count = choose_uniform(key, cand)
-    direction, cell = index // (N * N), index % (N * N)
-    possible = count > 0
+    return index % (N * N), index // (N * N), count > 0
+
+
+def _jump(state: CraftState, data: dict, cell, direction, possible, grid=None):
+    """``state`` standing at ``cell`` facing ``direction`` (where ``possible``), with the
+    units of the promised count that the USE will not pick up added."""
     dtype = state.inventory.dtype
     held = state.inventory[data["item_id"]]
     # a primitive's USE picks one unit up; the rest of the promised count is added here
     missing = jnp.maximum(data["count"].astype(dtype) - held - data["picked"].astype(dtype), 0)
-    # the stand cell, if a barrier, is cleared (compare-and-select, as in dynamics)
-    flat = state.grid.reshape(-1)
-    cleared = jnp.where((jnp.arange(N * N) == cell) & possible, jnp.uint8(C.EMPTY), flat)
-    jumped = state.replace(
-        grid=cleared.reshape(N, N),
+    return state.replace(
+        grid=state.grid if grid is None else grid,
         pos=jnp.where(possible, jnp.stack([cell // N, cell % N]), state.pos).astype(jnp.int32),
         direction=jnp.where(possible, direction, state.direction).astype(jnp.int32),
         inventory=state.inventory.at[data["item_id"]].add(jnp.where(possible, missing, 0)),
     )
+
+
+def give_teleport(key: jax.Array, state: CraftState, params: CraftParams, data: dict):
+    """The teleport of every ``give_X`` but the treasures'; ``data`` says which X and how
+    many (see ``teleport_data``).
+
+    One function for the whole family (``Parametric``), so a batch in which different
+    environments call different give_X templates evaluates it once, not once per X.
+    """
+    cell, direction, possible = _stand(key, state, data)
     action = jnp.where(possible, C.USE, C.NOOP).astype(jnp.int32)
-    return jumped, action
+    return _jump(state, data, cell, direction, possible), action
+
+
+def treasure_teleport(key: jax.Array, state: CraftState, params: CraftParams, data: dict):
+    """``give_gold`` / ``give_gem``: as ``give_teleport``, but a barrier cell next to the
+    treasure is a stand cell too, and is cleared. A family of its own, so that only a
+    hierarchy holding a treasure template (make_goldarrow's) pays for the grid write."""
+    cell, direction, possible = _stand(key, state, data, data["barrier_kind"])
+    flat = state.grid.reshape(-1)  # compare-and-select, as in dynamics (no scatter)
+    grid = jnp.where((jnp.arange(N * N) == cell) & possible, jnp.uint8(C.EMPTY), flat)
+    action = jnp.where(possible, C.USE, C.NOOP).astype(jnp.int32)
+    return _jump(state, data, cell, direction, possible, grid.reshape(N, N)), action
 
 
 def teleport_data(item: str, count: int = 1) -> dict:
-    """Per-template data of ``give_teleport``: the item, the kind to stand next to, the
-    barrier that may be cleared to stand there (empty: none), the count promised, and the
-    units the USE picks up (1 for a primitive)."""
+    """Per-template data of the teleports: the item, the kind to stand next to, the count
+    promised, the units the USE picks up (1 for a primitive) and, for a treasure, the
+    barrier that may be cleared to stand there."""
     item_id = C.KIND_ID[item]
-    barrier = {"gold": C.WATER, "gem": C.STONE}.get(item, C.EMPTY)
-    return {
+    data = {
         "item_id": np.int32(item_id),
         "target_kind": np.uint8(C.WORKSHOP_OF.get(item, item_id)),
-        "barrier_kind": np.uint8(barrier),
         "count": np.int32(count),
         "picked": np.int32(item not in C.CRAFTED),
     }
+    if item in C.TREASURE_TOOL:
+        data["barrier_kind"] = np.uint8({"gold": C.WATER, "gem": C.STONE}[item])
+    return data
+
+
+def teleport_of(item: str, count: int = 1) -> Parametric:
+    """The ``Parametric`` teleport of the template promising ``count`` of ``item``."""
+    fn = treasure_teleport if item in C.TREASURE_TOOL else give_teleport
+    return Parametric(fn, teleport_data(item, count))
 
 
 def _held_fn(item_id: int, count: int, held: bool) -> Callable:
@@ -154,7 +179,7 @@ def make_templates(side_cost: str = "held") -> dict[str, OptionTemplate]:
             satisfied=_held_fn(item_id, count, True),
             initiation=_held_fn(item_id, count, False),
             k_max=count * C.STEP_CAP[item],
-            teleport=Parametric(give_teleport, teleport_data(item, count)),
+            teleport=teleport_of(item, count),
             nominal_steps=count * C.NOMINAL_STEPS[item],
             description=f"{what} {how}".strip(),
             side_cost=_side_cost_fn(item, side_cost),
