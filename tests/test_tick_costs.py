@@ -16,7 +16,7 @@ from hier_env import KeyDoor, make_keydoor
 from smjax.agents import make_agent
 from smjax.options.runner import Controls, HierarchyRunner
 from smjax.train.config import TrainConfig
-from smjax.train.engine import Engine, SeedState
+from smjax.train.engine import Engine, SeedState, _decide
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -168,3 +168,48 @@ def test_a_second_identical_run_loads_its_programs_from_the_cache(tmp_path):
     unused = _run_in_subprocess({"SMJAX_CACHE_DIR": str(off), "SMJAX_COMPILATION_CACHE": "0"},
                                 _ONE_PROGRAM)
     assert not off.exists() and unused["hits"] == 0 and unused["misses"] == 0, unused
+
+
+def _root_calls_give_key_where(key_cells: tuple[int, ...]):
+    """KeyDoor with the root scripted: it calls give_key where the key lies in ``key_cells``,
+    else walks right until the step cap (give_key is then never called in that episode)."""
+    from smjax.options import declare
+
+    env, params = make_keydoor()
+    cells = jnp.asarray(key_cells)
+
+    def root(key, state, params, mask):
+        return jnp.where((state.key_pos == cells).any() & ~state.has_key, 0, 1)
+
+    h = declare(env, "open_door", {"open_door": ["give_key", "right"], "give_key": ["primitives"]},
+                policies={"open_door": root})
+    cfg = TrainConfig(num_envs=8, gate_envs=64, gate_max_ticks=20)  # < the 30-step cap: one episode
+    engine = Engine(env, params, h, make_agent("ppo", hidden_sizes=(16,)), cfg)
+    keys = jax.random.split(jax.random.PRNGKey(0), 2)
+    state = SeedState(engine.reset(keys, jnp.zeros((2,), jnp.int32)), engine.init_learner(keys), keys)
+    bank = engine.new_bank(state.learner)
+    learned = jnp.zeros((2, h.num_options), bool)
+    give_key = jnp.full((2,), h.option_index("give_key"), jnp.int32)
+    # the gate's program, without its early stop (every environment plays to the end)
+    args = (jax.random.split(jax.random.PRNGKey(4), 2), state.learner.params, bank, learned,
+            give_key, jnp.zeros((2,), jnp.int32), jnp.asarray(True),
+            engine._seed_temperatures("sample", 2), jnp.asarray(cfg.gate_max_ticks),
+            jnp.zeros((2,), bool), _decide([None] * 2))
+    result, _ = engine._run_episodes(args, cfg.gate_envs)
+    return {k: np.asarray(v) for k, v in result.items()}
+
+
+def test_a_gate_leaves_out_environments_where_the_learner_is_never_called():
+    # The key lies in cells 0-3, uniformly. Called in every environment: none left out.
+    every = _root_calls_give_key_where((0, 1, 2, 3))
+    np.testing.assert_array_equal(every["uncalled"], 0.0)
+    # Called only where the key is in cell 0 or 1: about half the environments never call
+    # the learner; they are neither successes nor failures of give_key.
+    half = _root_calls_give_key_where((0, 1))
+    assert ((half["uncalled"] > 0.3) & (half["uncalled"] < 0.7)).all(), half["uncalled"]
+    assert (half["completed"] <= 1.0 - half["uncalled"] + 1e-6).all()
+    # Never called: no evidence at all, reported as 0 (the level cannot pass on it).
+    never = _root_calls_give_key_where(())
+    np.testing.assert_array_equal(never["uncalled"], 1.0)
+    np.testing.assert_array_equal(never["success"], 0.0)
+    np.testing.assert_array_equal(never["completed"], 0.0)

@@ -277,6 +277,11 @@ class Engine:
         """Run ``num_envs`` environments until each has finished one learner episode (or
         ``max_ticks``); each environment's first episode counts, so short episodes are not
         over-represented, and one still unfinished at ``max_ticks`` counts as a failure.
+        An environment whose levels above never called the learner by ``max_ticks`` says
+        nothing about it and is left out of the means (``uncalled``: their share): counted
+        as failures they held a deep level's gate below its threshold however well the
+        option did where it was called (make_flag's ``give_grass``: 26-40% of environments
+        uncalled in 2,000 ticks, 97% success where called; benchmarks/RESULTS.md 24).
         ``skip``: start as finished (under ``vmap`` a skipped seed does not keep the loop
         running for the others; its result is meaningless).
 
@@ -316,8 +321,14 @@ class Engine:
 
         zeros = jnp.zeros((num_envs,), jnp.float32)
         init = (carry, key, jnp.full((num_envs,), skip, bool), zeros, zeros, jnp.asarray(0))
-        _, _, done, ret, success, ticks = jax.lax.while_loop(cond, body, init)
-        return {"return": ret.mean(), "success": success.mean(), "completed": done.mean(),
+        carry, _, done, ret, success, ticks = jax.lax.while_loop(cond, body, init)
+        # (unfinished and not started now: no learner episode ever started there. The early
+        # stops above stay exact: leaving such environments out can only move the mean
+        # between the two bounds ``certain`` uses)
+        uncalled = ~done & ~carry.learner_started
+        counted = jnp.maximum(num_envs - uncalled.sum(), 1)
+        return {"return": ret.sum() / counted, "success": success.sum() / counted,
+                "completed": done.mean(), "uncalled": uncalled.mean(),
                 "env_steps": ticks * num_envs}
 
     @staticmethod
