@@ -31,18 +31,20 @@ import numpy as np
 
 from smjax.core.sampling import choose_uniform
 from smjax.envs.craft import constants as C
-from smjax.envs.craft.oracle import best_return, ingredient_counts
+from smjax.envs.craft.oracle import BARRIER_OF_TREASURE, best_return, ingredient_counts
 from smjax.envs.craft.types import CraftParams, CraftState
 from smjax.options import Hierarchy, OptionTemplate, Parametric, declare
 
 N = C.GRID_SIZE
 
 
-def stand_candidates(grid: jax.Array, target_kind: int, barrier_kind: int = C.EMPTY) -> jax.Array:
+def stand_candidates(grid: jax.Array, target_kind: int, barrier_kind=None) -> jax.Array:
     """bool [4, 12, 12]: standing at (x, y) facing direction d looks at a ``target_kind``
-    cell, (x, y) being empty or of ``barrier_kind`` (the default, empty: empty cells only)."""
+    cell, (x, y) being empty or (where given) of ``barrier_kind``."""
     target = grid == target_kind
-    standable = (grid == C.EMPTY) | (grid == barrier_kind)
+    standable = grid == C.EMPTY
+    if barrier_kind is not None:
+        standable = standable | (grid == barrier_kind)
     pad = jnp.pad(target, 1)  # pad[x + 1, y + 1] == target[x, y]
     facing = []
     for dx, dy in C.DIRECTION_DELTAS:
@@ -50,7 +52,7 @@ def stand_candidates(grid: jax.Array, target_kind: int, barrier_kind: int = C.EM
     return jnp.stack(facing) & standable[None]
 
 
-def _stand(key: jax.Array, state: CraftState, data: dict, barrier_kind=C.EMPTY):
+def _stand(key: jax.Array, state: CraftState, data: dict, barrier_kind=None):
     """A uniform (cell, facing) pair next to ``data``'s target: (cell, direction, possible)."""
     cand = stand_candidates(state.grid, data["target_kind"], barrier_kind).reshape(-1)
     index, count = choose_uniform(key, cand)
@@ -106,14 +108,14 @@ def teleport_data(item: str, count: int = 1) -> dict:
         "count": np.int32(count),
         "picked": np.int32(item not in C.CRAFTED),
     }
-    if item in C.TREASURE_TOOL:
-        data["barrier_kind"] = np.uint8({"gold": C.WATER, "gem": C.STONE}[item])
+    if item_id in BARRIER_OF_TREASURE:
+        data["barrier_kind"] = np.uint8(BARRIER_OF_TREASURE[item_id])
     return data
 
 
 def teleport_of(item: str, count: int = 1) -> Parametric:
     """The ``Parametric`` teleport of the template promising ``count`` of ``item``."""
-    fn = treasure_teleport if item in C.TREASURE_TOOL else give_teleport
+    fn = treasure_teleport if C.KIND_ID[item] in BARRIER_OF_TREASURE else give_teleport
     return Parametric(fn, teleport_data(item, count))
 
 
@@ -195,9 +197,10 @@ def recipe_children(task: str) -> dict[str, list[str]]:
     children: dict[str, list[str]] = {}
 
     def add(option: str, item: str, count: int = 1) -> None:
-        kids = [C.give_name(i, n) for i, n in ingredient_counts(item).items()]
+        needed = ingredient_counts(item)
+        kids = [C.give_name(i, n) for i, n in needed.items()]
         children[option] = ([C.give_name(item)] if count > 1 else []) + kids + ["primitives"]
-        for i, n in ingredient_counts(item).items():
+        for i, n in needed.items():
             if C.give_name(i, n) not in children:
                 add(C.give_name(i, n), i, n)
         if count > 1 and C.give_name(item) not in children:
