@@ -201,8 +201,9 @@ def test_failed_condition_pops_without_reward():
 
 @pytest.mark.parametrize("switch", [None, False, True])
 def test_side_cost_shapes_only_a_template_learners_reward_and_only_when_asked(switch):
-    """Reward = F_o + c(s) - gamma * c(s') with the switch on; F_o alone otherwise; the
-    recorded success stays F_o either way."""
+    """Reward = F_o + c(s) - c(s') with the switch on (undiscounted: holding a cost that
+    does not change earns nothing); F_o alone otherwise; the recorded success stays F_o
+    either way."""
     import dataclasses
     env = KeyDoor()
     h = env.hierarchies()["paper"]
@@ -220,7 +221,7 @@ def test_side_cost_shapes_only_a_template_learners_reward_and_only_when_asked(sw
     bank[0, 3] = 5.0  # the learned root calls give_key, the learner, which is satisfied at once
     _, tr, ends = runner.tick(carry, jax.random.PRNGKey(3), None, jnp.asarray(bank, jnp.float32),
                               controls)
-    shaped = 1.0 + (0.1 * 3 + 0.05) - GAMMA * (0.1 * 4 + 0.05)
+    shaped = 1.0 + (0.1 * 3 + 0.05) - (0.1 * 4 + 0.05)
     np.testing.assert_allclose(np.asarray(tr.reward), shaped if switch else 1.0, rtol=1e-6)
     np.testing.assert_allclose(np.asarray(ends.success), 1.0)
 

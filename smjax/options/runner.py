@@ -232,7 +232,7 @@ class HierarchyRunner(PolicyBank):
         learner_idx = jnp.maximum(controls.learner, 0)
         on = options_on(decision.stack, self.h.num_options)  # before the pops
         shaping = template_fields.side_costs(self.templates, self.env_params, carry.env_state,
-                                             state, discount, on, controls.side_cost)
+                                             state, on, controls.side_cost)
         acc = phases.account(
             started=carry.learner_started, learner_return=carry.learner_return,
             task_return=carry.task_return, decided=decision.learner_decided, reward=reward,

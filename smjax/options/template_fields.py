@@ -29,13 +29,17 @@ def stop_conditions(templates, env_params, state) -> tuple[jax.Array, jax.Array]
     return sat, sat
 
 
-def side_costs(templates, env_params, before, after, discount, on, weight):
-    """Every template's extra reward [B, O] ``c(s) - discount * c(s')`` for its
-    ``side_cost`` c, times ``weight`` (``Controls.side_cost``), where it is ``on`` the
-    stack (0 for the root, and 0.0 altogether where no weight is given or no template
-    has a side cost). Summed over an option's run it telescopes to minus the discounted
-    cost it ends with, above what it started with. ``discount``: [B], or [B, O] (each
-    option's own: ``phases.tick_discount``)."""
+def side_costs(templates, env_params, before, after, on, weight):
+    """Every template's extra reward [B, O] ``c(s) - c(s')`` for its ``side_cost`` c, times
+    ``weight`` (``Controls.side_cost``), where it is ``on`` the stack (0 for the root, and
+    0.0 altogether where no weight is given or no template has a side cost).
+
+    Undiscounted on purpose: a cost is charged when it is incurred (a unit picked up) and
+    given back when it goes (a unit consumed), so what an option already holds when it is
+    called costs nothing while it waits. The discounted form ``c(s) - gamma * c(s')`` paid
+    ``(1 - gamma) * c`` every tick for holding c: over a run, up to c in all, so an option
+    called while holding weight x 0.1 x (items) >= 1 earned more by never finishing
+    (RESULTS section 25)."""
     if weight is None or not any(t.side_cost is not None for t in templates):
         return 0.0
     cost = jax.vmap(lambda s: per_option(templates, env_params, s, "side_cost", 0.0, jnp.float32))
@@ -43,8 +47,7 @@ def side_costs(templates, env_params, before, after, discount, on, weight):
     c1 = cost(after)
     weight = jnp.asarray(weight, jnp.float32)
     template = (jnp.arange(len(templates) + 1) > 0)[None, :]  # the root is option 0
-    per_option_discount = discount if discount.ndim == 2 else discount[:, None]
-    return jnp.where(on & template, weight * (c0 - per_option_discount * c1), 0.0)
+    return jnp.where(on & template, weight * (c0 - c1), 0.0)
 
 
 def task_success(success, env_params, state, info: dict) -> jax.Array | None:
