@@ -47,7 +47,8 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     episode; per environment (return, success, length in ticks, finished), and, where the
     state has an inventory, the units of each item gained per option [O, K] (summed over
     first episodes; a gain counts for the option on top of the stack when the tick starts,
-    so a call's first step counts for its caller; an episode's last step is not seen);
+    so a call's first step counts for its caller; an episode's last step is not seen), and
+    each environment's inventory before its first episode's last tick [B, K];
     the ticks of each first episode with each option on top [B, O]; the option on top
     in each first episode's last tick [B]; and how often the option on top chose each
     action where it decided [B, O, A] (the tick's own pick: the same keys as ``tick``)."""
@@ -67,9 +68,11 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             return ~c[2].all() & (c[6] < max_ticks)
 
         def body(c):
-            carry, key, done, ret, success, length, t, gains, on_top, last_top, chosen = c
+            carry, key, done, ret, success, length, t, gains, on_top, last_top, chosen, held = c
             key, k = jax.random.split(key)
             before = _inventory(carry.env_state)
+            if before is not None:
+                held = jnp.where(done[:, None], held, before)
             top = jnp.maximum(jax.vmap(stack_top)(carry.stack), 0)
             chosen = chosen + jnp.where(done[:, None, None], 0, top_choice(carry, k, top))
             carry, _, ends = runner.tick(carry, k, None, bank, controls)  # nobody learns
@@ -81,7 +84,7 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             on_top = on_top + jnp.where(done[:, None], 0, jax.nn.one_hot(top, O, dtype=jnp.int32))
             return (carry, key, done | ends.finished, jnp.where(first, ends.ret, ret),
                     jnp.where(first, ends.success, success), jnp.where(first, t + 1, length),
-                    t + 1, gains, on_top, jnp.where(done, last_top, top), chosen)
+                    t + 1, gains, on_top, jnp.where(done, last_top, top), chosen, held)
 
         def top_choice(carry, k, top):
             """int32 [B, O, A]: one-hot of the top option's pick where it decides now,
@@ -95,14 +98,15 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
                     * (jax.nn.one_hot(pick, A, dtype=jnp.int32) * decides[:, None])[:, None, :])
 
         inv = _inventory(carry.env_state)
-        gains = jnp.zeros((O, 0 if inv is None else inv.shape[-1]), jnp.float32)
+        K = 0 if inv is None else inv.shape[-1]
+        gains = jnp.zeros((O, K), jnp.float32)
         init = (carry, key, jnp.zeros((num_envs,), bool), zeros, zeros,
                 jnp.zeros((num_envs,), jnp.int32), jnp.asarray(0), gains,
                 jnp.zeros((num_envs, O), jnp.int32), jnp.zeros((num_envs,), jnp.int32),
-                jnp.zeros((num_envs, O, A), jnp.int32))
-        _, _, done, ret, success, length, _, gains, on_top, last_top, chosen = \
+                jnp.zeros((num_envs, O, A), jnp.int32), jnp.zeros((num_envs, K), jnp.float32))
+        _, _, done, ret, success, length, _, gains, on_top, last_top, chosen, held = \
             jax.lax.while_loop(cond, body, init)
-        return ret, success, length, done, gains / num_envs, on_top, last_top, chosen
+        return ret, success, length, done, gains / num_envs, on_top, last_top, chosen, held
 
     return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, None)))
 
@@ -136,6 +140,21 @@ def where_time_goes(on_top, last_top, chosen, success, done, names, action_names
             "top_at_end_of_others": {k: round(v / max(short.sum(), 1), 3)
                                      for k, v in ended.most_common()},
             "choices_full_success": choices(full), "choices_others": choices(short)}
+
+
+def held_at_end(held, ret, done, kinds) -> dict:
+    """Mean units of each item held before the last tick of the episodes that returned
+    nothing (ran into the cap) and of those that ended below the seed's best return (what
+    the task charged for), where the state has an inventory."""
+    held, ret, done = (np.asarray(x) for x in (held, ret, done))
+    out = {}
+    for name, mask in (("held_before_end_of_zero_return", done & (ret <= 0)),
+                       ("held_before_end_of_short_return",
+                        done & (ret > 0) & (ret < ret[done].max(initial=0) - 1e-6))):
+        means = held[mask].mean(0) if mask.any() else np.zeros(held.shape[-1])
+        out[name] = {(kinds[k] if kinds else str(k)): round(float(v), 2)
+                     for k, v in enumerate(means) if v >= 0.05}
+    return out
 
 
 def summarize(ret, success, length, done) -> dict:
@@ -184,6 +203,9 @@ def main(argv=None) -> int:
                 for i in range(len(seeds))]
     gains = np.asarray(out[4]).mean(0)  # [O, K], mean over seeds, per episode
     kinds = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names
+    if gains.shape[1]:
+        for i, p in enumerate(per_seed):
+            p |= held_at_end(out[8][i], out[0][i], out[3][i], kinds)
     picked = {engine.h.option_names[o]: {(kinds[k] if kinds else str(k)): round(float(v), 3)
                                          for k, v in enumerate(gains[o]) if v >= 0.005}
               for o in range(gains.shape[0]) if gains[o].sum() >= 0.005}

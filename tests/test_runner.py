@@ -273,5 +273,21 @@ def test_craft_surplus_side_cost_leaves_the_recipe_ingredients_free():
         assert got <= float(held_costs[name](state, params)) + 1e-6
 
     check()
+    leftover_env, _ = smjax.make("craft/get_gem", observation="none", side_cost="leftover")
+    leftover = leftover_env.templates()
+
+    @settings(max_examples=40, deadline=None)
+    @given(st.sampled_from(names), st.lists(st.integers(0, 3), min_size=len(C.ITEMS),
+                                            max_size=len(C.ITEMS)))
+    def check_leftover(name, counts):
+        # "leftover": as "surplus" while X is missing, as "held" once X is held
+        inv = base.inventory.at[len(C.KIND_NAMES) - len(C.ITEMS):].set(jnp.asarray(counts))
+        state = base.replace(inventory=inv.astype(base.inventory.dtype))
+        has_x = counts[C.ITEMS.index(name.removeprefix("give_"))] > 0
+        want = (held_costs if has_x else costs)[name](state, params)
+        np.testing.assert_allclose(float(leftover[name].side_cost(state, params)), float(want),
+                                   atol=1e-6)
+
+    check_leftover()
     with pytest.raises(ValueError, match="side_cost must be one of"):
         smjax.make("craft/get_gem", side_cost="everything")

@@ -72,8 +72,8 @@ class OptionTemplate:
       side_cost: optional cost of what a state holds beyond the template's promise (a
         teleport lands with none of it; Craft: 0.1 per unit of items other than the one
         promised). Where the trainer asks (fine-tuning, ``TrainConfig.finetune_side_cost``)
-        a learner of this template is also rewarded by its discounted decrease (potential
-        shaping), so what its run leaves behind costs it as the task's reward would; its
+        a learner of this template is also rewarded by its decrease ``c(s) - c(s')``, so
+        what its run picks up and leaves behind costs it as the task's reward would; its
         F_o success is unchanged.
     """
 

@@ -98,7 +98,8 @@ def make_craft(
 ) -> tuple[CraftEnv, CraftParams]:
     """Build ``(env, params)`` for a Craft task, validating every override value.
     ``side_cost``: what the ``give_X`` templates' side cost charges (fine-tuning's shaping):
-    "held", every unit held but X; "surplus", only units beyond what X's recipe consumes."""
+    "held", every unit held but X; "surplus", only units beyond what X's recipe consumes;
+    "leftover", as "surplus" until X is held, then as "held"."""
     observation = parse_choice("observation", observation, OBSERVATIONS)
     side_cost = parse_choice("side_cost", side_cost, templates.SIDE_COSTS)
     fixed_map = parse_bool("fixed_map", fixed_map)

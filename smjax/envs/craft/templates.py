@@ -142,26 +142,32 @@ def recipe_counts(item: str) -> dict[str, int]:
     return counts
 
 
-SIDE_COSTS = ("held", "surplus")
+SIDE_COSTS = ("held", "surplus", "leftover")
 
 
-def _side_cost_fn(item: str, kind: str) -> Callable:
+def _side_cost_fn(item: str, kind: str, count: int = 1) -> Callable:
     # the task's reward takes 0.1 per unit of any item held but the goal: a give_X run that
     # ends holding more than its teleport would have (X) is charged the same way. "held"
     # charges every other unit, the ingredients X's recipe uses too (their charge comes at
     # once, the credit when crafting consumes them later); "surplus" charges only the units
-    # beyond what X's recipe tree consumes, so gathering ingredients is free.
+    # beyond what X's recipe tree consumes, so gathering ingredients is free, but so is a
+    # spare ingredient still held at the end; "leftover" charges as "surplus" until X is
+    # held (``count`` of it) and as "held" from then on: gathering is free, what the run
+    # leaves over is not.
     item_id = C.KIND_ID[item]
     free = np.zeros(C.NUM_KINDS, np.float32)
-    if kind == "surplus":
+    if kind != "held":
         for k, n in recipe_counts(item).items():
             free[C.KIND_ID[k]] = n
     others = np.ones(C.NUM_KINDS, np.float32)
     others[item_id] = 0.0
 
     def fn(state: CraftState, params: CraftParams) -> jax.Array:
-        extra = jnp.maximum(state.inventory.astype(jnp.float32) - free, 0.0)
-        return 0.1 * jnp.sum(extra * others)
+        inv = state.inventory.astype(jnp.float32)
+        allowed = free
+        if kind == "leftover":
+            allowed = jnp.where(inv[item_id] >= count, 0.0, free)
+        return 0.1 * jnp.sum(jnp.maximum(inv - allowed, 0.0) * others)
     return fn
 
 
@@ -184,7 +190,7 @@ def make_templates(side_cost: str = "held") -> dict[str, OptionTemplate]:
             teleport=teleport_of(item, count),
             nominal_steps=count * C.NOMINAL_STEPS[item],
             description=f"{what} {how}".strip(),
-            side_cost=_side_cost_fn(item, side_cost),
+            side_cost=_side_cost_fn(item, side_cost, count),
         )
     return out
 
