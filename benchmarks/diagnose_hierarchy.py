@@ -111,14 +111,15 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, None)))
 
 
-def where_time_goes(on_top, last_top, chosen, success, done, names, action_names) -> dict:
-    """Mean ticks per episode with each option on top, in fully successful episodes and
-    in the others; the share of the others that ended (or hit the cap) with each option
+def where_time_goes(on_top, last_top, chosen, success, done, names, action_names,
+                    best: float = 1.0) -> dict:
+    """Mean ticks per episode with each option on top, in fully successful episodes (at the
+    task's ``best`` success) and in the others; the share of the others that ended (or hit the cap) with each option
     on top; and the mean number of times per episode each deciding option chose each of
     its children, in both kinds of episode (where a loop is: which choice repeats)."""
     on_top, last_top, chosen, success, done = (np.asarray(x) for x in
                                                (on_top, last_top, chosen, success, done))
-    full = done & (success >= 1.0)
+    full = done & (success >= best - 1e-6)  # the task's best (Hierarchy.success_ceiling)
 
     def ticks(mask):
         if not mask.any():
@@ -199,7 +200,7 @@ def main(argv=None) -> int:
     action_names = list(engine.h.primitive_names[:engine.h.num_primitives]) + names[1:]
     per_seed = [summarize(*(x[i] for x in out[:4]))
                 | where_time_goes(out[5][i], out[6][i], out[7][i], out[1][i], out[3][i], names,
-                                  action_names)
+                                  action_names, engine.h.success_ceiling)
                 for i in range(len(seeds))]
     gains = np.asarray(out[4]).mean(0)  # [O, K], mean over seeds, per episode
     kinds = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names
