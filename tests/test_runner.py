@@ -199,15 +199,19 @@ def test_failed_condition_pops_without_reward():
     assert (np.asarray(carry.env_state.pos) == 3).all()  # its controller still walked each tick
 
 
+@pytest.mark.parametrize("held_all_along", [False, True])
 @pytest.mark.parametrize("switch", [None, False, True])
-def test_side_cost_shapes_only_a_template_learners_reward_and_only_when_asked(switch):
+def test_side_cost_shapes_only_a_template_learners_reward_and_only_when_asked(switch,
+                                                                              held_all_along):
     """Reward = F_o + c(s) - c(s') with the switch on (undiscounted: holding a cost that
     does not change earns nothing); F_o alone otherwise; the recorded success stays F_o
     either way."""
     import dataclasses
     env = KeyDoor()
     h = env.hierarchies()["paper"]
-    cost = lambda s, p: 0.1 * s.t.astype(jnp.float32) + 0.05  # noqa: E731 - grows every tick
+    # grows every tick, or (held_all_along) a cost the option was called with and keeps
+    grows = 0.0 if held_all_along else 0.1
+    cost = lambda s, p: grows * s.t.astype(jnp.float32) + 0.05  # noqa: E731
     tpls = {**h.templates, "give_key": dataclasses.replace(h.templates["give_key"], side_cost=cost)}
     h = dataclasses.replace(h, templates=tpls)
     runner = HierarchyRunner(env, env.default_params, h, fixed_agent(2, h.num_actions), gamma=GAMMA,
@@ -221,7 +225,7 @@ def test_side_cost_shapes_only_a_template_learners_reward_and_only_when_asked(sw
     bank[0, 3] = 5.0  # the learned root calls give_key, the learner, which is satisfied at once
     _, tr, ends = runner.tick(carry, jax.random.PRNGKey(3), None, jnp.asarray(bank, jnp.float32),
                               controls)
-    shaped = 1.0 + (0.1 * 3 + 0.05) - (0.1 * 4 + 0.05)
+    shaped = 1.0 + (grows * 3 + 0.05) - (grows * 4 + 0.05)  # 1.0 exactly where nothing grows
     np.testing.assert_allclose(np.asarray(tr.reward), shaped if switch else 1.0, rtol=1e-6)
     np.testing.assert_allclose(np.asarray(ends.success), 1.0)
 
