@@ -244,23 +244,25 @@ def test_craft_side_cost_charges_items_other_than_the_promised_one():
     np.testing.assert_allclose(float(tpls["give_axe"].side_cost(state, params)), 0.3)
 
 
-def test_craft_surplus_side_cost_leaves_the_recipe_ingredients_free():
+def test_craft_surplus_and_leftover_side_costs_leave_the_recipe_ingredients_free():
     """``--env side_cost=surplus``: a give_X run is charged only for units beyond what X's
-    recipe tree consumes (so gathering ingredients costs nothing), never more than "held"."""
+    recipe tree consumes (so gathering ingredients costs nothing), never more than "held";
+    ``leftover`` charges as "surplus" while X is missing and as "held" once X is held."""
     from hypothesis import given, settings, strategies as st
     from smjax.envs.craft import constants as C
     from smjax.envs.craft.templates import recipe_counts
     import smjax
     env, params = smjax.make("craft/get_gem", observation="none", side_cost="surplus")
-    held_env, _ = smjax.make("craft/get_gem", observation="none")
-    surplus, held = env.templates(), held_env.templates()
+    kinds = {k: smjax.make("craft/get_gem", observation="none", side_cost=k)[0].templates()
+             for k in ("held", "leftover")}
     base = env.initial_state(jax.random.PRNGKey(0), params)
     assert recipe_counts("ladder") == {"plank": 1, "stick": 1, "wood": 2}
     for item in C.ITEMS:  # every node of the tree below the item, counted with multiplicity
         assert sum(recipe_counts(item).values()) == C.tree_size(item) - 1
     names = ["give_axe", "give_stick", "give_wood", "give_bridge", "give_ladder"]
-    costs = {n: jax.jit(surplus[n].side_cost) for n in names}
-    held_costs = {n: jax.jit(held[n].side_cost) for n in names}
+    costs = {n: jax.jit(env.templates()[n].side_cost) for n in names}
+    held_costs = {n: jax.jit(kinds["held"][n].side_cost) for n in names}
+    leftover_costs = {n: jax.jit(kinds["leftover"][n].side_cost) for n in names}
 
     @settings(max_examples=40, deadline=None)
     @given(st.sampled_from(names), st.lists(st.integers(0, 3), min_size=len(C.ITEMS),
@@ -274,24 +276,12 @@ def test_craft_surplus_side_cost_leaves_the_recipe_ingredients_free():
                          for k, n in zip(C.ITEMS, counts) if k != item)
         got = float(costs[name](state, params))
         np.testing.assert_allclose(got, want, atol=1e-5)
-        assert got <= float(held_costs[name](state, params)) + 1e-6
+        held_cost = float(held_costs[name](state, params))
+        assert got <= held_cost + 1e-6
+        has_x = counts[C.ITEMS.index(item)] > 0
+        np.testing.assert_allclose(float(leftover_costs[name](state, params)),
+                                   held_cost if has_x else got, atol=1e-6)
 
     check()
-    leftover_env, _ = smjax.make("craft/get_gem", observation="none", side_cost="leftover")
-    leftover = leftover_env.templates()
-
-    @settings(max_examples=40, deadline=None)
-    @given(st.sampled_from(names), st.lists(st.integers(0, 3), min_size=len(C.ITEMS),
-                                            max_size=len(C.ITEMS)))
-    def check_leftover(name, counts):
-        # "leftover": as "surplus" while X is missing, as "held" once X is held
-        inv = base.inventory.at[len(C.KIND_NAMES) - len(C.ITEMS):].set(jnp.asarray(counts))
-        state = base.replace(inventory=inv.astype(base.inventory.dtype))
-        has_x = counts[C.ITEMS.index(name.removeprefix("give_"))] > 0
-        want = (held_costs if has_x else costs)[name](state, params)
-        np.testing.assert_allclose(float(leftover[name].side_cost(state, params)), float(want),
-                                   atol=1e-6)
-
-    check_leftover()
     with pytest.raises(ValueError, match="side_cost must be one of"):
         smjax.make("craft/get_gem", side_cost="everything")
