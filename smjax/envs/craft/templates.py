@@ -161,13 +161,14 @@ def _side_cost_fn(item: str, kind: str, count: int = 1) -> Callable:
             free[C.KIND_ID[k]] = n
     others = np.ones(C.NUM_KINDS, np.float32)
     others[item_id] = 0.0
+    satisfied = _held_fn(item_id, count, True)  # the template's own satisfied
 
     def fn(state: CraftState, params: CraftParams) -> jax.Array:
-        inv = state.inventory.astype(jnp.float32)
         allowed = free
         if kind == "leftover":
-            allowed = jnp.where(inv[item_id] >= count, 0.0, free)
-        return 0.1 * jnp.sum(jnp.maximum(inv - allowed, 0.0) * others)
+            allowed = jnp.where(satisfied(state, params), 0.0, free)
+        extra = jnp.maximum(state.inventory.astype(jnp.float32) - allowed, 0.0)
+        return 0.1 * jnp.sum(extra * others)
     return fn
 
 
