@@ -143,15 +143,15 @@ def where_time_goes(on_top, last_top, chosen, success, done, names, action_names
             "choices_full_success": choices(full), "choices_others": choices(short)}
 
 
-def held_at_end(held, ret, done, kinds) -> dict:
+def held_at_end(held, ret, success, done, kinds, best: float = 1.0) -> dict:
     """Mean units of each item held before the last tick of the episodes that returned
-    nothing (ran into the cap) and of those that ended below the seed's best return (what
-    the task charged for), where the state has an inventory."""
-    held, ret, done = (np.asarray(x) for x in (held, ret, done))
+    nothing (ran into the cap) and of those that ended with a positive return below the
+    task's ``best`` success (what the task charged for), where the state has an inventory."""
+    held, ret, success, done = (np.asarray(x) for x in (held, ret, success, done))
     out = {}
     for name, mask in (("held_before_end_of_zero_return", done & (ret <= 0)),
                        ("held_before_end_of_short_return",
-                        done & (ret > 0) & (ret < ret[done].max(initial=0) - 1e-6))):
+                        done & (ret > 0) & (success < best - 1e-6))):
         means = held[mask].mean(0) if mask.any() else np.zeros(held.shape[-1])
         out[name] = {(kinds[k] if kinds else str(k)): round(float(v), 2)
                      for k, v in enumerate(means) if v >= 0.05}
@@ -206,7 +206,8 @@ def main(argv=None) -> int:
     kinds = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names
     if gains.shape[1]:
         for i, p in enumerate(per_seed):
-            p |= held_at_end(out[8][i], out[0][i], out[3][i], kinds)
+            p |= held_at_end(out[8][i], out[0][i], out[1][i], out[3][i], kinds,
+                             engine.h.success_ceiling)
     picked = {engine.h.option_names[o]: {(kinds[k] if kinds else str(k)): round(float(v), 3)
                                          for k, v in enumerate(gains[o]) if v >= 0.005}
               for o in range(gains.shape[0]) if gains[o].sum() >= 0.005}
