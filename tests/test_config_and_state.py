@@ -64,12 +64,14 @@ def test_host_state_round_trips_through_the_checkpoint_layout():
     # episodes (0: not full)
     assert st.level[1].count([3, 4], [[1.0, 0.0], [2.0, 1.0]], [0, 5], 64) == \
         [(3, 64, None), (7, 128, 0.6)]
-    st.level[1].record_gate({"success": [0.0, 0.75], "env_steps": [0, 99]}, 1, 12)
+    st.level[1].record_gate({"success": [0.0, 0.75], "uncalled": [0.0, 0.25],
+                             "env_steps": [0, 99]}, 1, 12)
     st.finish_level(1)
     st.finetune[0].turns.append({"template": "root", "episodes": 5, "running_success": None})
     host = json.loads(json.dumps(st.to_json()))
     assert host["stage"] == [0, 1] and host["episodes"] == [0, 7]
     assert host["levels"][0]["gate_success"] == [None, 0.75]
+    assert host["levels"][0]["gate_uncalled"] == [None, 0.25]
     assert host["finetune"]["turns"] == [[{"template": "root", "episodes": 5,
                                            "running_success": None}], []]
     assert TrainerState.from_json(host) == st
@@ -79,6 +81,24 @@ def test_host_state_round_trips_through_the_checkpoint_layout():
     old = host | {"history": [[], [[1.0, 2]]]}
     old["finetune"] = old["finetune"] | {"task_history": [[[0.0, 3], [2.0, 2]], []]}
     assert TrainerState.from_json(old) == st
+
+
+def test_host_state_written_before_gate_uncalled_resumes_and_records_it():
+    """A checkpoint from before the gate's uncalled share was recorded: no such counter or
+    record key. It resumes with the counter unset, and the next level it finishes records
+    the share."""
+    plans = [LevelPlan("root", 0, 0, 2), LevelPlan("get_wood", 1, 0, 1)]
+    host = json.loads(json.dumps(TrainerState.new(plans, 2).to_json()))
+    del host["gate_uncalled"]
+    for record in host["levels"]:
+        del record["gate_uncalled"]
+    st = TrainerState.from_json(host)
+    assert [c.gate_uncalled for c in st.level] == [None, None]
+    st.level[0].record_gate({"success": [0.5, 0.0], "uncalled": [0.125, 0.0],
+                             "env_steps": [64, 0]}, 0, 3)
+    st.finish_level(0)
+    assert st.levels[0]["gate_uncalled"] == [0.125, None]
+    assert st.levels[0]["gate_success"] == [0.5, None]
 
 
 def _append_window(history: list, total: float, count: int, window: int) -> float | None:

@@ -33,6 +33,8 @@ def test_two_level_top_down_learns_and_works_without_teleports(top_down_run):
     for lvl in res["levels"]:
         assert all(a >= 1 for a in lvl["gate_attempts"]) and min(lvl["gate_success"]) >= 0.8
         assert all(n >= SMALL["eval_envs"] for n in lvl["gate_env_steps"])
+        assert all(0.0 <= u < 1.0 for u in lvl["gate_uncalled"])
+    assert res["levels"][0]["gate_uncalled"] == [0.0, 0.0]  # the root is always running
 
 
 def test_a_level_does_not_end_on_exploration_luck():
@@ -56,6 +58,7 @@ def test_a_level_does_not_end_on_exploration_luck():
     assert not all(root["reached"])  # some untrained greedy policies fail (seeds 0 and 2)
     ungated = run(make_keydoor(), cfg.replace(gate=False), [0], progress=False)["levels"][0]
     assert ungated["reached"] == [True] and ungated["gate_attempts"] == [0]
+    assert ungated["gate_uncalled"] == [None]
 
 
 def test_results_contract(top_down_run):
@@ -78,7 +81,8 @@ def test_results_contract(top_down_run):
     # the learner's own metrics, per seed and level, and per option while fine-tuning
     written = b"".join(e.read_bytes() for e in events)
     for tag in (b"seed_0/level_1_open_door/learner/entropy", b"seed_1/level_2_give_key/learner/approx_kl",
-                b"/learner/kl_stopped", b"seed_0/level_1_open_door/running_success"):
+                b"/learner/kl_stopped", b"seed_0/level_1_open_door/running_success",
+                b"seed_1/level_2_give_key/gate_uncalled"):
         assert tag in written, tag
     assert res["finetune"] is not None  # top-down fine-tunes by default
     # (joint, the default: every learned option under finetune/joint/NAME)

@@ -76,6 +76,8 @@ class LevelPhase:
             success = c.record_gate(result, s, st.chunks + cfg.gate_interval)
             if self._tb is not None:
                 self._tb.add_scalar(f"{self._tb_level_tag(s)}/gate_success", success, c.env_steps)
+                self._tb.add_scalar(f"{self._tb_level_tag(s)}/gate_uncalled", c.gate_uncalled,
+                                    c.env_steps)
             if success >= cfg.threshold:
                 passed.append(s)
         return passed

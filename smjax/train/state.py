@@ -161,6 +161,7 @@ class _Counters:
         """Count seed ``s``'s attempt (``result``: the episodes program's, gathered); its
         success."""
         self.gate_success = float(result["success"][s])
+        self.gate_uncalled = float(result["uncalled"][s])
         self.gate_attempts += 1
         self.gate_env_steps += int(result["env_steps"][s])
         self.gate_next = next_chunk
@@ -175,6 +176,9 @@ class LevelCounters(_Counters):
     running: float | None = None  # the learner's running success (None: window not full yet)
     reached: bool = False
     gate_success: float | None = None
+    # the last attempt's share of environments whose levels above never called the
+    # option (left out of gate_success: Engine._first_episodes)
+    gate_uncalled: float | None = None
     gate_attempts: int = 0
     gate_env_steps: int = 0
     gate_next: int = 0
@@ -197,6 +201,7 @@ class FinetuneCounters(_Counters):
     env_steps: int = 0
     task_running: float | None = None  # teleport-free task success over the window
     gate_success: float | None = None
+    gate_uncalled: float | None = None  # the root is always called: 0 once a gate ran
     gate_attempts: int = 0
     gate_env_steps: int = 0
     gate_next: int = 0
@@ -246,10 +251,11 @@ class FinetuneCounters(_Counters):
 LEVEL_KEYS = tuple(f.name for f in dataclasses.fields(LevelCounters))
 FINETUNE_KEYS = tuple(f.name for f in dataclasses.fields(FinetuneCounters))
 # a level's results.json entry: per seed, filled when the seed finishes the level
-# (gate_success: the last attempt's, None: never tried)
+# (gate_success, gate_uncalled: the last attempt's, None: never tried)
 RECORD_KEYS = {"episodes": "episodes", "env_steps": "env_steps", "reached": "reached",
                "final_running_success": "running", "gate_success": "gate_success",
-               "gate_attempts": "gate_attempts", "gate_env_steps": "gate_env_steps"}
+               "gate_uncalled": "gate_uncalled", "gate_attempts": "gate_attempts",
+               "gate_env_steps": "gate_env_steps"}
 
 
 @dataclass
@@ -284,7 +290,8 @@ class TrainerState:
         """Record seed ``s``'s level in its results entry; on to its next stage."""
         record, counters = self.levels[self.stage[s]], self.level[s]
         for name, key in RECORD_KEYS.items():
-            record[name][s] = getattr(counters, key)
+            # (a record resumed from a checkpoint written before gate_uncalled lacks it)
+            record.setdefault(name, [None] * len(self.stage))[s] = getattr(counters, key)
         self.stage[s] += 1
         self.started[s] = False
 
@@ -308,7 +315,8 @@ class TrainerState:
         seeds = range(len(host["stage"]))
         ft = host["finetune"]  # format 3 and older lack the keep-the-better counters
         return cls(stage=list(host["stage"]), started=list(host["started"]),
-                   level=[LevelCounters(**{k: host[k][s] for k in LEVEL_KEYS}) for s in seeds],
+                   level=[LevelCounters(**{k: host[k][s] for k in LEVEL_KEYS if k in host})
+                          for s in seeds],
                    finetune=[FinetuneCounters(**{k: ft[k][s] for k in FINETUNE_KEYS if k in ft})
                              for s in seeds],
                    levels=host["levels"], curves=host["curves"],
