@@ -5,7 +5,7 @@ was on top when an episode ended short of full success, and what each deciding o
 chose (any environment: where a hierarchy loses its episodes, and which choice loops).
 
     python benchmarks/diagnose_hierarchy.py RUN_DIR [--episodes 1024] [--policy sample]
-        [--max-ticks 2000] [--partial] [--json OUT.json]
+        [--max-ticks 2000] [--partial] [--json OUT.json] [--trace N]
 
 RUN_DIR is a finished ``smjax train ... --out RUN_DIR`` (``--partial``: a stopped one;
 seeds still in their levels play partly trained options). Every seed's hierarchy runs alone
@@ -16,6 +16,12 @@ Reading it on Craft: an episode's return is ``max(0, [goal held] - 0.1 x other i
 held)`` at its end, so a positive return means the goal was reached, and ``(1 - return)
 / 0.1`` is the number of other items still held (get_gem keeps its axe: 1 at best).
 Episodes with return 0 either ran into the step cap or ended holding ten items or more.
+
+``--trace N`` also prints N episodes of the first seed that ended short of the task's best
+(after the report, on standard error; the seed's environments are played again from its reset
+key, at most 256 of them, so with up to 256 --episodes from the report's start states): the start state where the environment has a text form
+(``Environment.describe``; Craft: the map), then the episode as runs of ticks with the same
+option on top and the same inventory, with the agent's position where the state has one.
 """
 from __future__ import annotations
 
@@ -111,6 +117,69 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, None)))
 
 
+TRACE_ENVS = 256  # environments a trace plays (its per-tick record is [ticks, envs, items])
+
+
+def trace_program(engine, num_envs: int, ticks: int):
+    """jit of: one seed's ``num_envs`` environments for ``ticks`` ticks from reset, as the
+    evaluation plays them (nobody learns); the start states, and per tick [T, B] the option
+    on top, the inventory [T, B, K] and position [T, B, 2] (zero-width where the state has
+    none), whether an episode ended, and its success."""
+    runner = engine.runner
+
+    def play(key, bank, learned, temperature):
+        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
+                            temperature=temperature, acts_frozen=True)
+        k_reset, key = jax.random.split(key)
+        carry = runner.reset(k_reset, controls, num_envs)
+
+        def tick(carry, k):
+            state, empty = carry.env_state, jnp.zeros((num_envs, 0), jnp.int32)
+            inventory = getattr(state, "inventory", empty)
+            pos = getattr(state, "pos", empty)
+            top = jax.vmap(stack_top)(carry.stack)
+            carry, _, ends = runner.tick(carry, k, None, bank, controls)
+            return carry, (top, inventory, pos, ends.finished, ends.success)
+
+        _, per_tick = jax.lax.scan(tick, carry, jax.random.split(key, ticks))
+        return carry.env_state, per_tick
+
+    return jax.jit(play)
+
+
+def trace_lost(engine, start, per_tick, count: int, kinds) -> str:
+    """Text of up to ``count`` first episodes that ended short of the task's best (or were
+    still running): the start state, then runs of ticks with the same option on top and
+    inventory (``ticks A-B option held={...} pos P..Q``)."""
+    top, inventory, pos, finished, success = (np.asarray(x) for x in per_tick)
+    T, B = top.shape
+    end = np.where(finished.any(0), finished.argmax(0), T - 1)
+    short = [b for b in range(B) if not finished[end[b], b]
+             or success[end[b], b] < engine.h.success_ceiling - 1e-6]
+    names, lines = engine.h.option_names, []
+    for b in short[:count]:
+        ran = "ran into the trace's end" if not finished[end[b], b] else \
+            f"ended with success {success[end[b], b]:.2f}"
+        lines.append(f"== episode {b}: {end[b] + 1} ticks, {ran}")
+        text = engine.env.describe(jax.tree.map(lambda x: x[b], start))
+        if text:
+            lines.append(text)
+        runs = []  # [first tick, last tick, (option, held), position at first, at last]
+        for t in range(end[b] + 1):
+            held = {(kinds[k] if kinds else str(k)): int(v)
+                    for k, v in enumerate(inventory[t, b]) if v}
+            what = (names[top[t, b]] if top[t, b] >= 0 else "-", held)
+            where = tuple(pos[t, b].tolist())
+            if runs and runs[-1][2] == what:
+                runs[-1][1], runs[-1][4] = t, where
+            else:
+                runs.append([t, t, what, where, where])
+        for first, last, (option, held), start_at, end_at in runs:
+            at = f" pos {start_at}..{end_at}" if start_at else ""
+            lines.append(f"  ticks {first}-{last} {option} held={held}{at}")
+    return "\n".join(lines) if lines else "(no episode ended short of the best)"
+
+
 def where_time_goes(on_top, last_top, chosen, success, done, names, action_names,
                     best: float = 1.0) -> dict:
     """Mean ticks per episode with each option on top, in fully successful episodes (at the
@@ -188,14 +257,18 @@ def main(argv=None) -> int:
     parser.add_argument("--partial", action="store_true",
                         help="play a run stopped before its last level (its untrained options as they are)")
     parser.add_argument("--json", help="also write the report here")
+    parser.add_argument("--trace", type=int, default=0, metavar="N",
+                        help="also print N of the first seed's episodes that ended short of "
+                             "the best, tick by tick (on standard error)")
     args = parser.parse_args(argv)
-    if args.episodes < 1 or args.max_ticks < 1:
-        parser.error("--episodes and --max-ticks must be >= 1")
+    if args.episodes < 1 or args.max_ticks < 1 or args.trace < 0:
+        parser.error("--episodes and --max-ticks must be >= 1, --trace >= 0")
     engine, bank, learned, seeds = load_trained(args.run_dir, partial=args.partial)
     program = episodes_program(engine, args.episodes, args.max_ticks)
     keys = jax.random.split(jax.random.key(args.seed), len(seeds))
-    out = program(keys, bank, learned, eval_temperatures(args.policy, engine.h.num_options,
-                                                           engine.cfg.option_temperature))
+    temperature = eval_temperatures(args.policy, engine.h.num_options,
+                                    engine.cfg.option_temperature)
+    out = program(keys, bank, learned, temperature)
     names = list(engine.h.option_names)
     action_names = list(engine.h.primitive_names[:engine.h.num_primitives]) + names[1:]
     per_seed = [summarize(*(x[i] for x in out[:4]))
@@ -220,6 +293,11 @@ def main(argv=None) -> int:
     print(text)
     if args.json:
         Path(args.json).write_text(text + "\n")
+    if args.trace:  # the first seed's start states again (its reset key), fresh tick keys
+        first = jax.tree.map(lambda x: x[0], (bank, learned))
+        program = trace_program(engine, min(args.episodes, TRACE_ENVS), args.max_ticks)
+        start, per_tick = program(keys[0], *first, temperature)
+        print(trace_lost(engine, start, per_tick, args.trace, kinds), file=sys.stderr)
     return 0
 
 

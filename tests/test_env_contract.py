@@ -202,13 +202,22 @@ class GridPastTheEndCorridor(Corridor):
         return ((0, 4, 4, 4),)
 
 
+class BlankTextCorridor(Corridor):
+    """Describes every state as an empty string (None is the way to say "no text form")."""
+
+    def describe(self, state, params=None):
+        return ""
+
+
 @pytest.mark.parametrize("env,match", [
     (LoudCorridor(), "observation in space failed for tests/corridor"),
+    (BlankTextCorridor(), "describe failed for tests/corridor: describe returned ''"),
     (GridPastTheEndCorridor(), "spaces failed for tests/corridor: observation_layout: "),
     (BatchSensitiveCorridor(), r"vmap == loop failed for tests/corridor: step 0, env 0: "
                                r"leaf \[2\]"),  # the reward
     (NoResetCorridor(), "auto-reset failed for tests/corridor"),
-], ids=["obs-outside-space", "grid-past-the-end", "vmap-differs", "no-auto-reset"])
+], ids=["obs-outside-space", "blank-describe", "grid-past-the-end", "vmap-differs",
+        "no-auto-reset"])
 def test_broken_env_is_named(env, match):
     with pytest.raises(AssertionError, match=match):
         check_env(env, env.default_params, **SMALL)

@@ -102,6 +102,11 @@ class Environment(Generic[TEnvState, TEnvParams]):
         """RGB uint8 image (H, W, 3) of one (unbatched) state."""
         raise NotImplementedError
 
+    def describe(self, state: TEnvState, params: TEnvParams | None = None) -> str | None:
+        """One (unbatched) state as text, for traces of episodes (``benchmarks/
+        diagnose_hierarchy.py --trace``); None where the environment has no text form."""
+        return None
+
     def observation_layout(self, params: TEnvParams | None = None) -> tuple:
         """The grids of the flattened observation (``smjax.core.layout.Grid``), for
         learners with a convolutional torso; none by default."""

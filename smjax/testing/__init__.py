@@ -17,7 +17,8 @@ with the property's name and names the environment):
   ``Environment.step`` does);
 * ``final_observation``: it is the observation ``step_env`` ended on when an episode
   ends, and the returned observation otherwise;
-* ``render``: ``render`` returns a uint8 (H, W, 3) image (skipped if not implemented).
+* ``render``: ``render`` returns a uint8 (H, W, 3) image (skipped if not implemented);
+* ``describe``: ``describe`` returns a non-empty str, or None (no text form).
 
 ``check_hierarchy(env, params, hierarchy)`` checks every template of a hierarchy on
 states reached by random play: ``template output`` (predicates are bool scalars),

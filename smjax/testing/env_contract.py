@@ -202,11 +202,15 @@ def check_render(env, params, state, who: str) -> None:
     try:
         image = env.render(state, params)
     except NotImplementedError:  # rendering is optional
-        return
-    image = np.asarray(image)
-    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[-1] != 3:
-        fail("render", who, f"render returned {image.dtype} {image.shape}, expected uint8 "
-             f"(H, W, 3)")
+        image = None
+    if image is not None:
+        image = np.asarray(image)
+        if image.dtype != np.uint8 or image.ndim != 3 or image.shape[-1] != 3:
+            fail("render", who, f"render returned {image.dtype} {image.shape}, expected uint8 "
+                 f"(H, W, 3)")
+    text = env.describe(state, params)  # optional too: None where there is no text form
+    if text is not None and (not isinstance(text, str) or not text.strip()):
+        fail("describe", who, f"describe returned {text!r}, expected a non-empty str or None")
 
 
 def _spread(steps: int, count: int = 3) -> list[int]:

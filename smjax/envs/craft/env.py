@@ -19,6 +19,7 @@ from smjax.core.overrides import INT32_MAX, parse_bool, parse_choice, parse_int
 from smjax.core.registry import register
 from smjax.envs.craft import constants as C
 from smjax.envs.craft import dynamics, observation, reset, templates
+from smjax.envs.craft.ascii import to_ascii
 from smjax.envs.craft.render import render_state
 from smjax.envs.craft.types import (
     OBSERVATIONS, CraftConfig, CraftParams, CraftState, make_params,
@@ -74,6 +75,10 @@ class CraftEnv(Environment[CraftState, CraftParams]):
 
     def render(self, state: CraftState, params: CraftParams | None = None):
         return render_state(state.grid, state.pos, state.direction, state.inventory)
+
+    def describe(self, state: CraftState, params: CraftParams | None = None) -> str:
+        """The map as ASCII (``ascii.to_ascii``: ``@`` the agent, the top row y = 11)."""
+        return to_ascii(state)
 
     def templates(self) -> dict:
         if self._templates is None:
