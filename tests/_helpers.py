@@ -1,5 +1,19 @@
-"""Helpers shared by the resume tests (test_resume, test_sweep, test_finetune)."""
+"""Helpers shared by several test files: losing the machine after a checkpoint (the resume
+tests: test_resume, test_sweep, test_finetune, ...) and loading a script of benchmarks/."""
+import importlib.util
+from pathlib import Path
+
 from smjax.train.loop import HierarchyTrainer
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def load_benchmark(name: str):
+    """The module of ``benchmarks/NAME.py`` (benchmarks/ is not a package)."""
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 class MachineLost(Exception):

@@ -3,26 +3,20 @@ short of the task's best, groups their ticks into runs of one option on top and 
 and shows the start state where the environment has a text form (Craft's map)."""
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 from types import SimpleNamespace
 
 import jax
 import numpy as np
 
 import smjax
+from _helpers import load_benchmark
 from smjax.cli import main
 from smjax.envs.craft.ascii import to_ascii
 
-_SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "diagnose_hierarchy.py"
-
 
 def _load():
-    spec = importlib.util.spec_from_file_location("diagnose_hierarchy", _SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("diagnose_hierarchy")
 
 
 def test_craft_describes_its_map_and_other_environments_may_not():

@@ -8,17 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import importlib.util
-from pathlib import Path
 
 import pytest
 
+from _helpers import BENCHMARKS, load_benchmark
 from smjax.envs.fetch.templates import K_MAX
 
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "fetch_sample_complexity.py"
-_spec = importlib.util.spec_from_file_location("fetch_sample_complexity", _PATH)
-FSC = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(FSC)
+FSC = load_benchmark("fetch_sample_complexity")
 
 
 def _args(**over):
@@ -78,5 +74,5 @@ def test_the_fetch_preset_is_the_benchmarks_recipe():
     script = FSC.level_config(3, "top-down", _args(hierarchy="paper_hold_all", num_envs=128,
                                                    max_steps=800_000, set=[f"levels={json.dumps(levels)}"]),
                               dict(FSC.AGENT) | {"gradient_steps_per_update": 128})
-    preset = resolve_config(file=_PATH.parents[1] / "configs" / "fetch_stack3.yaml")
+    preset = resolve_config(file=BENCHMARKS.parent / "configs" / "fetch_stack3.yaml")
     assert preset == resolve_config(script)

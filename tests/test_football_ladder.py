@@ -1,24 +1,17 @@
 """The AI ladder script runs, and the difficulty param vmaps through the env."""
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import smjax
-
-_SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "football_ai_ladder.py"
+from _helpers import load_benchmark
 
 
 def _load_ladder():
-    spec = importlib.util.spec_from_file_location("football_ai_ladder", _SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("football_ai_ladder")
 
 
 def test_ladder_table_shape_and_antisymmetric_bookkeeping():

@@ -2,15 +2,12 @@
 from __future__ import annotations
 
 import argparse
-import importlib.util
-from pathlib import Path
 
 import pytest
 
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "football_learning.py"
-_spec = importlib.util.spec_from_file_location("football_learning", _PATH)
-FL = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(FL)
+from _helpers import load_benchmark
+
+FL = load_benchmark("football_learning")
 
 
 def _args(num_envs=64, total=2_100_000, stop=False):
