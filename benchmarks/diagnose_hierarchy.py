@@ -19,9 +19,10 @@ Episodes with return 0 either ran into the step cap or ended holding ten items o
 
 ``--trace N`` also prints N episodes of the first seed that ended short of the task's best
 (after the report, on standard error; the seed's environments are played again from its reset
-key, at most 256 of them, so with up to 256 --episodes from the report's start states): the start state where the environment has a text form
-(``Environment.describe``; Craft: the map), then the episode as runs of ticks with the same
-option on top and the same inventory, with the agent's position where the state has one.
+key, at most 256 of them, so with up to 256 --episodes from the report's start states): the
+start state where the environment has a text form (``Environment.describe``; Craft: the map),
+then the episode as runs of ticks with the same option on top and the same inventory, with
+the agent's position where the state has one.
 """
 from __future__ import annotations
 
@@ -40,6 +41,17 @@ from smjax.options.runner import NO_OPTION, Controls
 from smjax.options.stack import stack_top
 from smjax.train.engine import EVAL_TEMPERATURES, eval_temperatures
 from smjax.train.policy import load_trained
+
+
+def _frozen_controls(learned, temperature) -> Controls:
+    """The final evaluation's controls: root on the stack, no teleports, nobody learns."""
+    return Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
+                    temperature=temperature, acts_frozen=True)
+
+
+def _item_name(kinds, k: int) -> str:
+    """Item ``k``'s name where the environment's items are named (Craft), else its index."""
+    return kinds[k] if kinds else str(k)
 
 
 def _inventory(state):
@@ -62,8 +74,7 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     O, A = engine.h.num_options, engine.h.num_actions
 
     def one_seed(key, bank, learned, temperature):
-        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
-                            temperature=temperature, acts_frozen=True)  # nobody learns
+        controls = _frozen_controls(learned, temperature)
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
         deciding = runner.deciding(learned, False)  # fixed for the whole run (top_choice)
@@ -128,8 +139,7 @@ def trace_program(engine, num_envs: int, ticks: int):
     runner = engine.runner
 
     def play(key, bank, learned, temperature):
-        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
-                            temperature=temperature, acts_frozen=True)
+        controls = _frozen_controls(learned, temperature)
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
 
@@ -166,7 +176,7 @@ def trace_lost(engine, start, per_tick, count: int, kinds) -> str:
             lines.append(text)
         runs = []  # [first tick, last tick, (option, held), position at first, at last]
         for t in range(end[b] + 1):
-            held = {(kinds[k] if kinds else str(k)): int(v)
+            held = {_item_name(kinds, k): int(v)
                     for k, v in enumerate(inventory[t, b]) if v}
             what = (names[top[t, b]] if top[t, b] >= 0 else "-", held)
             where = tuple(pos[t, b].tolist())
@@ -183,9 +193,10 @@ def trace_lost(engine, start, per_tick, count: int, kinds) -> str:
 def where_time_goes(on_top, last_top, chosen, success, done, names, action_names,
                     best: float = 1.0) -> dict:
     """Mean ticks per episode with each option on top, in fully successful episodes (at the
-    task's ``best`` success) and in the others; the share of the others that ended (or hit the cap) with each option
-    on top; and the mean number of times per episode each deciding option chose each of
-    its children, in both kinds of episode (where a loop is: which choice repeats)."""
+    task's ``best`` success) and in the others; the share of the others that ended (or hit
+    the cap) with each option on top; and the mean number of times per episode each deciding
+    option chose each of its children, in both kinds of episode (where a loop is: which
+    choice repeats)."""
     on_top, last_top, chosen, success, done = (np.asarray(x) for x in
                                                (on_top, last_top, chosen, success, done))
     full = done & (success >= best - 1e-6)  # the task's best (Hierarchy.success_ceiling)
@@ -222,7 +233,7 @@ def held_at_end(held, ret, success, done, kinds, best: float = 1.0) -> dict:
                        ("held_before_end_of_short_return",
                         done & (ret > 0) & (success < best - 1e-6))):
         means = held[mask].mean(0) if mask.any() else np.zeros(held.shape[-1])
-        out[name] = {(kinds[k] if kinds else str(k)): round(float(v), 2)
+        out[name] = {_item_name(kinds, k): round(float(v), 2)
                      for k, v in enumerate(means) if v >= 0.05}
     return out
 
@@ -281,7 +292,7 @@ def main(argv=None) -> int:
         for i, p in enumerate(per_seed):
             p |= held_at_end(out[8][i], out[0][i], out[1][i], out[3][i], kinds,
                              engine.h.success_ceiling)
-    picked = {engine.h.option_names[o]: {(kinds[k] if kinds else str(k)): round(float(v), 3)
+    picked = {engine.h.option_names[o]: {_item_name(kinds, k): round(float(v), 3)
                                          for k, v in enumerate(gains[o]) if v >= 0.005}
               for o in range(gains.shape[0]) if gains[o].sum() >= 0.005}
     report = {"run_dir": str(args.run_dir), "policy": args.policy, "episodes": args.episodes,

@@ -223,6 +223,13 @@ def test_broken_env_is_named(env, match):
         check_env(env, env.default_params, **SMALL)
 
 
+def test_describe_is_checked_where_rendering_is_skipped():
+    # render=False is for environments without a graphics backend (Fetch); text needs none
+    env = BlankTextCorridor()
+    with pytest.raises(AssertionError, match="describe failed for tests/corridor"):
+        check_env(env, env.default_params, render=False, **SMALL)
+
+
 def test_broken_teleport_and_controller_are_named():
     env = WrongDoorKeyDoor()
     hierarchy = declare(env, "open_door", {"open_door": ["give_key", "primitives"]})

@@ -202,13 +202,16 @@ def check_render(env, params, state, who: str) -> None:
     try:
         image = env.render(state, params)
     except NotImplementedError:  # rendering is optional
-        image = None
-    if image is not None:
-        image = np.asarray(image)
-        if image.dtype != np.uint8 or image.ndim != 3 or image.shape[-1] != 3:
-            fail("render", who, f"render returned {image.dtype} {image.shape}, expected uint8 "
-                 f"(H, W, 3)")
-    text = env.describe(state, params)  # optional too: None where there is no text form
+        return
+    image = np.asarray(image)
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[-1] != 3:
+        fail("render", who, f"render returned {image.dtype} {image.shape}, expected uint8 "
+             f"(H, W, 3)")
+
+
+def check_describe(env, params, state, who: str) -> None:
+    """Optional too, but needs no graphics backend, so ``render=False`` does not skip it."""
+    text = env.describe(state, params)  # None: the environment has no text form
     if text is not None and (not isinstance(text, str) or not text.strip()):
         fail("describe", who, f"describe returned {text!r}, expected a non-empty str or None")
 
@@ -267,3 +270,4 @@ def _check_env(env, params, num_envs: int, steps: int, key, render: bool) -> Non
     check_auto_reset(env, params, traj, one, who)
     if render:
         check_render(env, params, index(traj[0], 0, 0), who)
+    check_describe(env, params, index(traj[0], 0, 0), who)
