@@ -93,6 +93,10 @@ def _add_train(sub):
     p.add_argument("--overwrite", action="store_true",
                    help="replace the run already in --out (its results, curves and checkpoints)")
     p.add_argument("--quiet", action="store_true", help="no progress bars; print only the summary line")
+    p.add_argument("--profile", action="store_true",
+                   help="print where the command's time went, from process start to the last file "
+                        "written (imports, set-up, tracing and compiling, chunks, gates, evaluation, "
+                        "checkpoints, results), and write it to OUT/profile.json")
     _add_debug(p)
     add_distributed(p)
 

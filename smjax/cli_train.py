@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from smjax.cli_errors import UsageError
+from smjax.core.timeline import TIMELINE
 
 
 def parse_value(text: str):
@@ -175,8 +176,10 @@ def choose_seeds(args, saved: dict | None) -> list[int]:
 
 
 def cmd_train(args) -> int:
-    from smjax.train.distributed import is_writer
-    from smjax.train.run import run
+    TIMELINE.add("interpreter, imports and arguments", 0.0, TIMELINE.now())
+    with TIMELINE.span("imports of training"):
+        from smjax.train.distributed import is_writer
+        from smjax.train.run import run
 
     initialize_distributed(args)  # before anything touches JAX
     saved = _saved_run(args)
@@ -194,6 +197,8 @@ def cmd_train(args) -> int:
                   resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep)
     if not is_writer():  # process 0 reports for the whole run
         return 0
+    if args.profile:
+        _write_profile(out)
     if sweep is None:
         print(json.dumps(_summary(results)))
         print(f"wrote {Path(out) / 'results.json'}, curves.csv, curves.png")
@@ -203,6 +208,14 @@ def cmd_train(args) -> int:
         print(f"wrote {Path(out) / 'sweep.json'}, point-<k>/results.json, curves.csv, curves.png")
     sys.stdout.flush()
     return 0
+
+
+def _write_profile(out) -> None:
+    """``--profile``: the timeline on stderr and in OUT/profile.json."""
+    print(TIMELINE.report(), file=sys.stderr)
+    path = Path(out) / "profile.json"
+    path.write_text(json.dumps(TIMELINE.to_dict(), indent=1) + "\n")
+    print(f"wrote {path}", file=sys.stderr)
 
 
 def _summary(results: dict) -> dict:

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from smjax.core.timeline import TIMELINE
 from smjax.train import checkpoint as ckpt
 from smjax.train import finetune as ft
 from smjax.train.seed_arrays import (  # noqa: F401 - NonFiniteError re-exported
@@ -146,17 +147,18 @@ class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
     def run(self) -> dict:
         st = self.state
         t_start = time.perf_counter() - st.wall_seconds
-        self._start_levels([s for s in self._training() if not st.started[s]])
+        self._timed("start levels (learner init, env reset)", self._start_levels,
+                    [s for s in self._training() if not st.started[s]])
         bar = Progress(self) if self.progress else None
         while self._training():
             t0 = time.perf_counter()
-            stats, windows, metrics = self._chunk()
+            stats, windows, metrics = self._timed("training chunks", self._chunk)
             dt = time.perf_counter() - t0
             candidates, task_candidates = self._account(stats, windows)
             self._log_learner(metrics)
             st.chunks += 1
-            passed = self._accept(candidates)
-            task_passed = self._accept_task(task_candidates)
+            passed = self._timed("gates", self._accept, candidates)
+            task_passed = self._timed("gates", self._accept_task, task_candidates)
             ended = [s for s in self._training() if not self._finetuning(s)
                      and (s in passed or self._budget_spent(self._level_cfg(s), s))]
             for s in passed:
@@ -175,10 +177,22 @@ class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
                 bar.draw(dt)
             if self.out_dir is not None and (ended or phase_ended or turn_ended
                                              or self._save_due()):
-                self.save()
+                with TIMELINE.span("checkpoint writes"):
+                    self.save()
         if bar is not None:
             bar.close()
-        return self._evaluate(t_start)
+        return self._timed("evaluation", self._evaluate, t_start)
+
+    def _timed(self, label: str, fn, *args):
+        """``fn(*args)``, its seconds on the timeline under ``label`` and the compiling
+        inside it under ``compile: label`` (apart, so the two never overlap)."""
+        compiled, began = self.state.compile_seconds, TIMELINE.now()
+        out = fn(*args)
+        compiling = self.state.compile_seconds - compiled
+        TIMELINE.add(label, began, TIMELINE.now() - began - compiling)
+        if compiling:
+            TIMELINE.add(f"compile: {label}", began, compiling)
+        return out
 
     def _training(self) -> list[int]:
         """Seeds that still have a level to train (or are fine-tuning)."""

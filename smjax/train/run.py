@@ -8,6 +8,7 @@ from typing import Any
 
 from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
+from smjax.core.timeline import TIMELINE
 from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
 from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_differences,
@@ -113,6 +114,7 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     it writes sweep.json there and each point's files under ``point-<k>/``.
     """
     enable_compilation_cache()  # a second run of the same programs skips compiling
+    TIMELINE.listen_to_jax()
     seeds = validate_seeds(seeds)
     if isinstance(hierarchy, str):  # a catalogue name: the config's field says it
         if cfg.hierarchy not in (None, hierarchy):
@@ -128,7 +130,8 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
         sweep = normalize_sweep(cfg, make_agent(cfg.algo, **cfg.agent), sweep)
     if resume and out_dir is None:
         raise ValueError("resume needs the run's output directory")
-    lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
+    with TIMELINE.span("output directory check and lock"):
+        lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
     try:
         return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume, sweep,
                            hierarchy)
@@ -141,12 +144,13 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
                 progress: bool, resume: bool, sweep: dict | None,
                 given: Hierarchy | None = None) -> dict:
     points = sweep_points(sweep) if sweep is not None else None
-    if isinstance(task, str):
-        env, env_params = make(task, **env_overrides)
-    else:
-        env, env_params = task
-    agent = make_learner(env, env_params, cfg)
-    hierarchy_name, hierarchy = resolve_hierarchy(env, cfg, given)
+    with TIMELINE.span("environment, learner and hierarchy"):
+        if isinstance(task, str):
+            env, env_params = make(task, **env_overrides)
+        else:
+            env, env_params = task
+        agent = make_learner(env, env_params, cfg)
+        hierarchy_name, hierarchy = resolve_hierarchy(env, cfg, given)
     reachable = reachable_root_threshold(cfg, hierarchy)
     if reachable is not cfg and progress and dist.is_writer():
         print(f"{env.name}: the best task success is {hierarchy.success_ceiling:g}, so the root "
@@ -173,12 +177,14 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     cfg.check_level_names([p.name for p in plans])
     slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
                              else (seeds, None, None))
-    check_fits(env, env_params, cfg, len(slot_seeds))
-    engine = Engine(env, env_params, hierarchy, agent, cfg)
-    trainer = HierarchyTrainer(engine, plans, slot_seeds, out_dir=out_dir, progress=progress,
-                               run_meta=identity, hp=hp, gamma=gamma)
+    with TIMELINE.span("memory check, engine and trainer"):
+        check_fits(env, env_params, cfg, len(slot_seeds))
+        engine = Engine(env, env_params, hierarchy, agent, cfg)
+        trainer = HierarchyTrainer(engine, plans, slot_seeds, out_dir=out_dir,
+                                   progress=progress, run_meta=identity, hp=hp, gamma=gamma)
     if resume:
-        trainer.restore()
+        with TIMELINE.span("checkpoint restore"):
+            trainer.restore()
     try:
         raw = trainer.run()
     except NonFiniteError as err:
@@ -203,7 +209,8 @@ def _finish(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra:
     config = cfg.to_dict() | extra
     results = build_results(env_name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config)
     if out_dir is not None and dist.is_writer():
-        write_results(out_dir, results, raw["curves"])
+        with TIMELINE.span("results.json, curves.csv, curves.png"):
+            write_results(out_dir, results, raw["curves"])
     results_with_raw: dict[str, Any] = dict(results)
     results_with_raw["_raw"] = raw
     return results_with_raw
