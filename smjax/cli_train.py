@@ -178,6 +178,9 @@ def cmd_train(args) -> int:
     from smjax.train.distributed import is_writer
     from smjax.train.run import run
 
+    for flag, value in (("--out", args.out), ("--resume", args.resume)):
+        if value is not None and not value.strip():  # else the default directory is used
+            raise UsageError(f"{flag} is empty (an unset shell variable?); name a directory")
     initialize_distributed(args)  # before anything touches JAX
     saved = _saved_run(args)
     cfg = build_config(args, saved)

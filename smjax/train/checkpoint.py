@@ -44,6 +44,7 @@ from typing import Any
 import jax
 
 from smjax.train import distributed as dist
+from smjax.train.outdir import probe_file
 from smjax.train.results import atomic_write_text, fsync_dir
 
 LATEST = "latest.json"
@@ -153,9 +154,7 @@ def _check_writable(root: Path) -> None:
     directory before they give up."""
     try:
         root.mkdir(parents=True, exist_ok=True)
-        probe = root / f".write-probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
+        probe_file(root / f".write-probe-{os.getpid()}")
     except OSError as err:
         raise CheckpointError(f"cannot write checkpoints to {root}: {err.strerror or err}; "
                               f"make it writable or choose another --out") from None
