@@ -15,23 +15,35 @@ from pathlib import Path
 from smjax.cli_errors import UsageError
 
 
+def short_text(text: str, limit: int = 80) -> str:
+    """``repr(text)`` cut to ``limit`` characters (an error never echoes a huge value)."""
+    shown = repr(text)
+    return shown if len(shown) <= limit else f"{shown[:limit]}... ({len(shown)} characters)"
+
+
 def parse_value(text: str):
     """``--set/--agent/--env`` values: JSON where it parses (numbers, lists, true), else text
     (each field's parser then reads words such as ``no`` strictly)."""
+    from smjax.train.bounds import strict_json
+
     try:
-        return json.loads(text)
+        return strict_json(text)
     except json.JSONDecodeError:
         return text
+    except ValueError as err:  # a key given twice
+        raise UsageError(f"{short_text(text)}: {err}") from None
 
 
 def key_values(items, what: str) -> dict:
     out = {}
     for item in items or []:
         if "=" not in item:
-            raise UsageError(f"{what} must look like KEY=VALUE, got {item!r}")
+            raise UsageError(f"{what} must look like KEY=VALUE, got {short_text(item)}")
         k, v = item.split("=", 1)
         if not k.strip():
-            raise UsageError(f"{what} needs a name before '=', got {item!r}")
+            raise UsageError(f"{what} needs a name before '=', got {short_text(item)}")
+        if k != k.strip():  # a stray space is a typo, not a field name
+            raise UsageError(f"{what} {short_text(item)}: the name has spaces around it")
         out[k.strip()] = parse_value(v)
     return out
 

@@ -182,8 +182,8 @@ def test_config_file_errors_are_one_line(tmp_path, capsys, content, suffix, need
 @pytest.mark.parametrize("extra, needle", [
     (["--agent", "gamma=0.5"], "--set gamma=0.5"), (["--set", "gate=perhaps"], "gate"),
     (["--set", "num_envs=2.5"], "num_envs"), (["--env", "fixed_map=maybe"], "fixed_map"),
-    (["--env", "max_steps=0"], "max_steps"), (["--num-envs", "100000000"], "batch too large"),
-    (["--num-envs", "3000000"], "batch too large"), (["--set", "noequals"], "KEY=VALUE"),
+    (["--env", "max_steps=0"], "max_steps"), (["--num-envs", "100000000"], "num_envs"),
+    (["--num-envs", "3000000"], "num_envs"), (["--set", "noequals"], "KEY=VALUE"),
     (["--seeds", "0"], "--seeds"), (["--coordinator", "no-such-host.invalid:1234",
                                       "--num-processes", "2", "--process-id", "1",
                                       "--coordinator-timeout", "1"], "cannot be resolved"),
