@@ -53,6 +53,9 @@ def _add_train(sub):
     p.add_argument("--resume", default=None, metavar="DIR",
                    help="continue the run checkpointed in DIR (its saved config is the base; "
                         "flags that contradict it are refused)")
+    p.add_argument("--resume-from", default=None, metavar="STEP",
+                   help="with --resume: the checkpoint step to continue from (e.g. step-30, the "
+                        "previous good one kept beside a corrupt latest)")
     p.add_argument("--out", default=None, help="output directory (default: runs/ENV_TASK_METHOD)")
     p.add_argument("--config", default=None, help="YAML or JSON file with TrainConfig fields")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE", help="override a TrainConfig field")

@@ -140,13 +140,15 @@ def _saved_run(args) -> dict | None:
     from smjax.train import checkpoint as ckpt
 
     if not args.resume:
+        if args.resume_from is not None:
+            raise UsageError("--resume-from STEP needs --resume DIR")
         return None
     if args.overwrite:
         raise UsageError("--resume and --overwrite contradict each other; pass one of them")
     if args.out and Path(args.out).resolve() != Path(args.resume).resolve():
         raise UsageError(f"--out {args.out} with --resume {args.resume}: a resumed run continues "
                          f"in its own directory; drop --out")
-    info = ckpt.shared_meta(args.resume)
+    info = ckpt.shared_meta(args.resume, args.resume_from)
     if info is None:
         raise UsageError(f"nothing to resume: no checkpoint in {args.resume} (train with --out "
                          f"{args.resume} first)")
@@ -206,7 +208,8 @@ def cmd_train(args) -> int:
     slots = len(seeds) * _num_points(sweep)
     args._batch = f"{slots} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
     results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
-                  resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep)
+                  resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep,
+                  resume_from=args.resume_from)
     if not is_writer():  # process 0 reports for the whole run
         return 0
     if sweep is None:
