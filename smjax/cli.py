@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import shlex
+import signal
 import sys
 from pathlib import Path
 
@@ -204,7 +206,10 @@ def _run_command(command, args) -> int:
     try:
         return command(args)
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        out = getattr(args, "_out", None)
+        how = (f"; resume with: smjax train {args.task} --resume {shlex.quote(str(out))}"
+               if out is not None and (Path(out) / "checkpoints").is_dir() else "")
+        print(f"interrupted{how}", file=sys.stderr)
         return 130
     except Exception as err:  # noqa: BLE001 - every error is reported, in one line
         if getattr(args, "debug", False):
@@ -237,7 +242,17 @@ def main(argv=None) -> int:
         enable_compilation_cache()
     command = {"train": cmd_train, "bench": _cmd_bench, "list": _cmd_list, "plot": _cmd_plot,
                "render": _cmd_render}[args.command]
-    return _run_command(command, args)
+    # schedulers (SLURM, ...) send SIGTERM before they kill a job: end as on Ctrl-C, lock
+    # released and the resume command printed, instead of dying on the spot
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return _run_command(command, args)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate(signum, frame):
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

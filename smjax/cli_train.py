@@ -207,6 +207,7 @@ def cmd_train(args) -> int:
     out = args.resume or args.out or f"runs/{args.task.replace('/', '_')}_{cfg.method}"
     slots = len(seeds) * _num_points(sweep)
     args._batch = f"{slots} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
+    args._out = out  # for the resume command an interruption prints
     results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
                   resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep,
                   resume_from=args.resume_from)
