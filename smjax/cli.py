@@ -135,6 +135,9 @@ def _add_list(sub):
 def _cmd_list(args) -> int:
     import smjax
 
+    if not any(name.startswith(args.prefix) for name in smjax.registry()):
+        raise UsageError(f"no registered task starts with {args.prefix!r}; `smjax list` shows "
+                         f"them all")
     for name, desc in smjax.registry().items():
         if not name.startswith(args.prefix):
             continue
@@ -160,6 +163,7 @@ def _add_plot(sub):
 def _cmd_plot(args) -> int:
     from smjax.viz.plots import check_curves, plot_curves
 
+    _check_image_path(args.out)
     for d in args.runs:
         check_curves(Path(d))
     print(plot_curves(args.runs, args.out, title=args.title))
@@ -185,8 +189,11 @@ def _cmd_render(args) -> int:
     from smjax.train.policy import frames_of, play_random, play_trained
     from smjax.viz.gif import write_gif
 
-    if args.steps < 1:
-        raise UsageError(f"--steps must be >= 1, got {args.steps}")
+    if not 1 <= args.steps <= MAX_RENDER_STEPS:  # each step's frame is kept in memory
+        raise UsageError(f"--steps must be in [1, {MAX_RENDER_STEPS}], got {args.steps}")
+    if not 0.1 <= args.fps <= 1000:  # (a GIF stores a frame's duration in 1/100 s)
+        raise UsageError(f"--fps must be in [0.1, 1000], got {args.fps:g}")
+    _check_image_path(args.out)  # before playing, which may take minutes
     if args.policy:
         env, params, states, total = play_trained(args.policy, seed_index=args.seed_index,
                                                   max_ticks=args.steps, partial=args.partial,
@@ -199,6 +206,18 @@ def _cmd_render(args) -> int:
     write_gif(frames_of(env, params, states), args.out, fps=args.fps)
     print(f"wrote {args.out} ({len(states)} frames, {note})")
     return 0
+
+
+MAX_RENDER_STEPS = 100_000
+
+
+def _check_image_path(out: str) -> None:
+    """Refuse an output path that cannot take an image file, before any work."""
+    path = Path(out)
+    if not out.strip() or path.is_dir():
+        raise UsageError(f"--out {out!r} is a directory or empty; name an image file")
+    if not path.parent.is_dir():
+        raise UsageError(f"--out {out}: folder {path.parent} does not exist")
 
 
 def _run_command(command, args) -> int:
