@@ -115,3 +115,24 @@ def test_a_host_state_outside_the_plan_is_refused(tmp_path):
         _edit_host(out, edit)
         with pytest.raises(ckpt.CheckpointError, match=f"cannot belong to this run: .*{needle}"):
             run(make_keydoor(), cfg, [0], out, progress=False, resume=True)
+
+
+@pytest.mark.slow
+def test_a_failed_evaluation_keeps_the_trained_state_and_results_follow_on_resume(
+        tmp_path, monkeypatch):
+    from smjax.train.loop import HierarchyTrainer
+
+    out = tmp_path / "run"
+    cfg = TrainConfig(**(TINY | {"max_episodes_per_level": 64, "finetune": "off"}))
+
+    def broken(self, t_start):
+        raise RuntimeError("evaluation failed")
+
+    with monkeypatch.context() as m:
+        m.setattr(HierarchyTrainer, "_evaluate", broken)
+        with pytest.raises(RuntimeError, match="evaluation failed"):
+            run(make_keydoor(), cfg, [0], out, progress=False)
+    assert ckpt.load_meta(out)["meta"]["trained"] and not (out / "results.json").exists()
+    # an evaluation-only setting may change when the run's training is done
+    run(make_keydoor(), cfg.replace(eval_max_ticks=500), [0], out, progress=False, resume=True)
+    assert (out / "results.json").exists()
