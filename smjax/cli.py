@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import shlex
+import signal
 import sys
 from pathlib import Path
 
@@ -53,6 +55,9 @@ def _add_train(sub):
     p.add_argument("--resume", default=None, metavar="DIR",
                    help="continue the run checkpointed in DIR (its saved config is the base; "
                         "flags that contradict it are refused)")
+    p.add_argument("--resume-from", default=None, metavar="STEP",
+                   help="with --resume: the checkpoint step to continue from (e.g. step-30, the "
+                        "previous good one kept beside a corrupt latest)")
     p.add_argument("--out", default=None, help="output directory (default: runs/ENV_TASK_METHOD)")
     p.add_argument("--config", default=None, help="YAML or JSON file with TrainConfig fields")
     p.add_argument("--set", action="append", metavar="FIELD=VALUE", help="override a TrainConfig field")
@@ -134,6 +139,9 @@ def _add_list(sub):
 def _cmd_list(args) -> int:
     import smjax
 
+    if not any(name.startswith(args.prefix) for name in smjax.registry()):
+        raise UsageError(f"no registered task starts with {args.prefix!r}; `smjax list` shows "
+                         f"them all")
     for name, desc in smjax.registry().items():
         if not name.startswith(args.prefix):
             continue
@@ -159,6 +167,7 @@ def _add_plot(sub):
 def _cmd_plot(args) -> int:
     from smjax.viz.plots import check_curves, plot_curves
 
+    _check_image_path(args.out)
     for d in args.runs:
         check_curves(Path(d))
     print(plot_curves(args.runs, args.out, title=args.title))
@@ -184,8 +193,11 @@ def _cmd_render(args) -> int:
     from smjax.train.policy import frames_of, play_random, play_trained
     from smjax.viz.gif import write_gif
 
-    if args.steps < 1:
-        raise UsageError(f"--steps must be >= 1, got {args.steps}")
+    if not 1 <= args.steps <= MAX_RENDER_STEPS:  # each step's frame is kept in memory
+        raise UsageError(f"--steps must be in [1, {MAX_RENDER_STEPS}], got {args.steps}")
+    if not 0.1 <= args.fps <= 1000:  # (a GIF stores a frame's duration in 1/100 s)
+        raise UsageError(f"--fps must be in [0.1, 1000], got {args.fps:g}")
+    _check_image_path(args.out)  # before playing, which may take minutes
     if args.policy:
         env, params, states, total = play_trained(args.policy, seed_index=args.seed_index,
                                                   max_ticks=args.steps, partial=args.partial,
@@ -200,12 +212,27 @@ def _cmd_render(args) -> int:
     return 0
 
 
+MAX_RENDER_STEPS = 100_000
+
+
+def _check_image_path(out: str) -> None:
+    """Refuse an output path that cannot take an image file, before any work."""
+    path = Path(out)
+    if not out.strip() or path.is_dir():
+        raise UsageError(f"--out {out!r} is a directory or empty; name an image file")
+    if not path.parent.is_dir():
+        raise UsageError(f"--out {out}: folder {path.parent} does not exist")
+
+
 def _run_command(command, args) -> int:
     """Run a command; a user's mistake is one line on stderr and exit code 2."""
     try:
         return command(args)
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        out = getattr(args, "_out", None)
+        how = (f"; resume with: smjax train {args.task} --resume {shlex.quote(str(out))}"
+               if out is not None and (Path(out) / "checkpoints").is_dir() else "")
+        print(f"interrupted{how}", file=sys.stderr)
         return 130
     except Exception as err:  # noqa: BLE001 - every error is reported, in one line
         if getattr(args, "debug", False):
@@ -238,7 +265,17 @@ def main(argv=None) -> int:
         enable_compilation_cache()
     command = {"train": cmd_train, "bench": _cmd_bench, "list": _cmd_list, "plot": _cmd_plot,
                "render": _cmd_render}[args.command]
-    return _run_command(command, args)
+    # schedulers (SLURM, ...) send SIGTERM before they kill a job: end as on Ctrl-C, lock
+    # released and the resume command printed, instead of dying on the spot
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return _run_command(command, args)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate(signum, frame):
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

@@ -16,23 +16,35 @@ from smjax.cli_errors import UsageError
 from smjax.core.timeline import TIMELINE
 
 
+def short_text(text: str, limit: int = 80) -> str:
+    """``repr(text)`` cut to ``limit`` characters (an error never echoes a huge value)."""
+    shown = repr(text)
+    return shown if len(shown) <= limit else f"{shown[:limit]}... ({len(shown)} characters)"
+
+
 def parse_value(text: str):
     """``--set/--agent/--env`` values: JSON where it parses (numbers, lists, true), else text
     (each field's parser then reads words such as ``no`` strictly)."""
+    from smjax.train.bounds import strict_json
+
     try:
-        return json.loads(text)
+        return strict_json(text)
     except json.JSONDecodeError:
         return text
+    except ValueError as err:  # a key given twice
+        raise UsageError(f"{short_text(text)}: {err}") from None
 
 
 def key_values(items, what: str) -> dict:
     out = {}
     for item in items or []:
         if "=" not in item:
-            raise UsageError(f"{what} must look like KEY=VALUE, got {item!r}")
+            raise UsageError(f"{what} must look like KEY=VALUE, got {short_text(item)}")
         k, v = item.split("=", 1)
         if not k.strip():
-            raise UsageError(f"{what} needs a name before '=', got {item!r}")
+            raise UsageError(f"{what} needs a name before '=', got {short_text(item)}")
+        if k != k.strip():  # a stray space is a typo, not a field name
+            raise UsageError(f"{what} {short_text(item)}: the name has spaces around it")
         out[k.strip()] = parse_value(v)
     return out
 
@@ -129,13 +141,15 @@ def _saved_run(args) -> dict | None:
     from smjax.train import checkpoint as ckpt
 
     if not args.resume:
+        if args.resume_from is not None:
+            raise UsageError("--resume-from STEP needs --resume DIR")
         return None
     if args.overwrite:
         raise UsageError("--resume and --overwrite contradict each other; pass one of them")
     if args.out and Path(args.out).resolve() != Path(args.resume).resolve():
         raise UsageError(f"--out {args.out} with --resume {args.resume}: a resumed run continues "
                          f"in its own directory; drop --out")
-    info = ckpt.shared_meta(args.resume)
+    info = ckpt.shared_meta(args.resume, args.resume_from)
     if info is None:
         raise UsageError(f"nothing to resume: no checkpoint in {args.resume} (train with --out "
                          f"{args.resume} first)")
@@ -181,6 +195,9 @@ def cmd_train(args) -> int:
         from smjax.train.distributed import is_writer
         from smjax.train.run import run
 
+    for flag, value in (("--out", args.out), ("--resume", args.resume)):
+        if value is not None and not value.strip():  # else the default directory is used
+            raise UsageError(f"{flag} is empty (an unset shell variable?); name a directory")
     initialize_distributed(args)  # before anything touches JAX
     saved = _saved_run(args)
     cfg = build_config(args, saved)
@@ -193,8 +210,10 @@ def cmd_train(args) -> int:
     out = args.resume or args.out or f"runs/{args.task.replace('/', '_')}_{cfg.method}"
     slots = len(seeds) * _num_points(sweep)
     args._batch = f"{slots} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
+    args._out = out  # for the resume command an interruption prints
     results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
-                  resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep)
+                  resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep,
+                  resume_from=args.resume_from)
     if not is_writer():  # process 0 reports for the whole run
         return 0
     if args.profile:

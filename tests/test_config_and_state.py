@@ -26,8 +26,8 @@ def test_sources_override_in_order(tmp_path):
     assert (cfg.num_envs, cfg.threshold, cfg.gamma) == (8, 0.6, 0.97)
     assert cfg.agent == {"learning_rate": 1e-3, "ent_coef": 0.2}  # merged, parsed
     assert resolve_config() == TrainConfig()
-    base = TrainConfig(num_envs=4, agent={"hidden": (16, 16)})
-    assert resolve_config(base).agent == {"hidden": [16, 16]}  # as JSON stores it
+    base = TrainConfig(num_envs=4, agent={"hidden_sizes": (16, 16)})
+    assert resolve_config(base).agent == {"hidden_sizes": [16, 16]}  # as JSON stores it
     assert resolve_config(base, sets={"threshold": 0.7}).num_envs == 4
     with pytest.raises(ConfigError, match="--set gamma=0.5"):
         resolve_config(agent={"gamma": 0.5})

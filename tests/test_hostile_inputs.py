@@ -182,8 +182,8 @@ def test_config_file_errors_are_one_line(tmp_path, capsys, content, suffix, need
 @pytest.mark.parametrize("extra, needle", [
     (["--agent", "gamma=0.5"], "--set gamma=0.5"), (["--set", "gate=perhaps"], "gate"),
     (["--set", "num_envs=2.5"], "num_envs"), (["--env", "fixed_map=maybe"], "fixed_map"),
-    (["--env", "max_steps=0"], "max_steps"), (["--num-envs", "100000000"], "batch too large"),
-    (["--num-envs", "3000000"], "batch too large"), (["--set", "noequals"], "KEY=VALUE"),
+    (["--env", "max_steps=0"], "max_steps"), (["--num-envs", "100000000"], "num_envs"),
+    (["--num-envs", "3000000"], "num_envs"), (["--set", "noequals"], "KEY=VALUE"),
     (["--seeds", "0"], "--seeds"), (["--coordinator", "no-such-host.invalid:1234",
                                       "--num-processes", "2", "--process-id", "1",
                                       "--coordinator-timeout", "1"], "cannot be resolved"),
@@ -326,7 +326,7 @@ def test_resaving_a_chunk_never_deletes_the_checkpoint_in_force(tmp_path, monkey
     ckpt.save_checkpoint(tmp_path, 3, _arrays(1.0), _meta())
     second = ckpt.save_checkpoint(tmp_path, 3, _arrays(2.0), _meta())
     assert second.name == "step-3.1" and ckpt.load_meta(tmp_path)["path"] == "step-3.1"
-    assert not (ckpt.checkpoint_dir(tmp_path) / "step-3").exists()
+    assert (ckpt.checkpoint_dir(tmp_path) / "step-3").exists()  # the previous, kept
     # a write error during the next save keeps the one in force, readable
     import orbax.checkpoint as ocp
 
@@ -384,7 +384,15 @@ def _read_only_errors(monkeypatch, folder: Path) -> None:
             raise OSError(errno.EROFS, "Read-only file system", str(self))
         return real(self, data)
 
+    real_open = os.open
+
+    def os_open(path, flags, *a, **k):  # the probe creates its file with os.open
+        if flags & os.O_CREAT and Path(path).resolve().parent == folder.resolve():
+            raise OSError(errno.EROFS, "Read-only file system", str(path))
+        return real_open(path, flags, *a, **k)
+
     monkeypatch.setattr(Path, "write_bytes", write_bytes)
+    monkeypatch.setattr(os, "open", os_open)
 
 
 @pytest.mark.parametrize("how", ["chmod", "erofs"])

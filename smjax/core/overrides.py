@@ -20,6 +20,12 @@ FALSE_WORDS = ("false", "0", "no", "off")
 INT32_MAX = 2**31 - 1
 
 
+def _short(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters: an error never echoes a huge value."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
 def _interval(low: float | None, high: float | None, low_open: bool, high_open: bool) -> str:
     """`` in [low, high]`` (open ends as parentheses); empty when there are no bounds."""
     if low is None and high is None:
@@ -35,7 +41,7 @@ def _check_range(name: str, value: float, low, high, low_open: bool, high_open: 
     too_high = high is not None and (value >= high if high_open else value > high)
     if too_low or too_high:
         raise ValueError(f"{name} must be {kind}{_interval(low, high, low_open, high_open)}, "
-                         f"got {value!r}")
+                         f"got {_short(value)}")
 
 
 def parse_bool(name: str, value: Any) -> bool:
@@ -52,13 +58,13 @@ def parse_bool(name: str, value: Any) -> bool:
             return False
     if hasattr(value, "dtype") and getattr(value, "shape", None) == () and value.dtype == bool:
         return bool(value)  # a numpy / JAX boolean scalar
-    raise ValueError(f"{name} must be true or false (also 1/0, yes/no, on/off), got {value!r}")
+    raise ValueError(f"{name} must be true or false (also 1/0, yes/no, on/off), got {_short(value)}")
 
 
 def _number(name: str, value: Any, kind: str) -> float | int:
     """A real number from a number or its text; bools and other types are refused."""
     if isinstance(value, bool) or value is None:
-        raise ValueError(f"{name} must be {kind}, got {value!r}")
+        raise ValueError(f"{name} must be {kind}, got {_short(value)}")
     if isinstance(value, str):
         text = value.strip()
         try:
@@ -68,13 +74,13 @@ def _number(name: str, value: Any, kind: str) -> float | int:
         try:
             return float(text)
         except ValueError:
-            raise ValueError(f"{name} must be {kind}, got {value!r}") from None
+            raise ValueError(f"{name} must be {kind}, got {_short(value)}") from None
     if hasattr(value, "item") and getattr(value, "shape", None) == ():
         value = value.item()  # numpy / JAX scalar
         if isinstance(value, bool):
-            raise ValueError(f"{name} must be {kind}, got {value!r}")
+            raise ValueError(f"{name} must be {kind}, got {_short(value)}")
     if not isinstance(value, (int, float)):
-        raise ValueError(f"{name} must be {kind}, got {type(value).__name__} {value!r}")
+        raise ValueError(f"{name} must be {kind}, got {type(value).__name__} {_short(value)}")
     return value
 
 
@@ -85,7 +91,7 @@ def parse_int(name: str, value: Any, low: int | None = None, high: int | None = 
     if isinstance(number, float):
         if not math.isfinite(number) or not number.is_integer():
             raise ValueError(f"{name} must be {kind}{_interval(low, high, False, False)}, "
-                             f"got {value!r}")
+                             f"got {_short(value)}")
         number = int(number)
     _check_range(name, number, low, high, False, False, kind)
     return number
@@ -98,21 +104,21 @@ def parse_float(name: str, value: Any, low: float | None = None, high: float | N
     number = float(_number(name, value, kind))
     if not math.isfinite(number):
         raise ValueError(f"{name} must be {kind}{_interval(low, high, low_open, high_open)}, "
-                         f"got {value!r}")
+                         f"got {_short(value)}")
     _check_range(name, number, low, high, low_open, high_open, kind)
     return number
 
 
 def parse_choice(name: str, value: Any, choices: Sequence[str]) -> str:
     if not isinstance(value, str) or value not in choices:
-        raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+        raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}, got {_short(value)}")
     return value
 
 
 def parse_int_list(name: str, value: Any, low: int = 1) -> tuple[int, ...]:
     """A sequence of integers (hidden layer sizes), as a tuple."""
     if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
-        raise ValueError(f"{name} must be a list of integers >= {low}, got {value!r}")
+        raise ValueError(f"{name} must be a list of integers >= {low}, got {_short(value)}")
     return tuple(parse_int(f"{name}[{i}]", v, low) for i, v in enumerate(value))
 
 
@@ -147,6 +153,6 @@ def coerce_annotated(name: str, value: Any, annotation: Any, default: Any) -> An
         return parse_float(name, value)
     if kind == "str":
         if not isinstance(value, str):
-            raise ValueError(f"{name} must be a string, got {value!r}")
+            raise ValueError(f"{name} must be a string, got {_short(value)}")
         return value
     return coerce_like(name, value, default)

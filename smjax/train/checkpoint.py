@@ -11,7 +11,12 @@ instant, a full disk and a write error:
 2. every file of it and its directories are fsynced;
 3. ``latest.json`` is replaced atomically (temporary file, fsync, rename, fsync of the
    directory);
-4. only then are older steps (and leftovers of interrupted saves) deleted.
+4. only then are older steps (and leftovers of interrupted saves) deleted; the step that
+   was in force before stays as the previous good one.
+
+Every step carries a manifest (``smjax.train.manifest``: its host state and the sha256 of
+its files), which a resume verifies; a step can be resumed from its manifest alone (no
+``latest.json``, or ``step=`` naming an older step: ``--resume-from``).
 
 A save that fails (read-only or full file system, I/O error) raises ``CheckpointError``
 at once, in one line: the folder is probed first, orbax creates the step directory in the
@@ -44,6 +49,8 @@ from typing import Any
 import jax
 
 from smjax.train import distributed as dist
+from smjax.train import manifest as mf
+from smjax.train.outdir import probe_file
 from smjax.train.results import atomic_write_text, fsync_dir
 
 LATEST = "latest.json"
@@ -153,19 +160,17 @@ def _check_writable(root: Path) -> None:
     directory before they give up."""
     try:
         root.mkdir(parents=True, exist_ok=True)
-        probe = root / f".write-probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
+        probe_file(root / f".write-probe-{os.getpid()}")
     except OSError as err:
         raise CheckpointError(f"cannot write checkpoints to {root}: {err.strerror or err}; "
                               f"make it writable or choose another --out") from None
 
 
 def _fresh_name(root: Path, step: int, in_force: str | None) -> str:
-    """``step-N`` unless it is the step ``latest.json`` points at (then a numbered variant):
-    a re-save of the same chunk must never overwrite the checkpoint in force."""
+    """``step-N`` unless that exists (then a numbered variant): a re-save of the same
+    chunk must never overwrite the checkpoint in force, nor the previous one kept."""
     name, k = f"step-{step}", 0
-    while name == in_force:
+    while name == in_force or (root / name).exists():  # never over a kept step
         k += 1
         name = f"step-{step}.{k}"
     return name
@@ -184,10 +189,10 @@ def _fsync_tree(path: Path) -> None:
     fsync_dir(path.parent)
 
 
-def _prune(root: Path, keep: str) -> None:
+def _prune(root: Path, keep: tuple) -> None:
     """Delete every step but ``keep`` and the temporaries of interrupted saves."""
     for old in root.iterdir():
-        stale_step = old.name.startswith("step-") and old.name != keep
+        stale_step = old.name.startswith("step-") and old.name not in keep
         stale_tmp = ".orbax-checkpoint-tmp" in old.name or old.name.startswith(f".{LATEST}.")
         if stale_step or stale_tmp:
             if old.is_dir():
@@ -207,7 +212,8 @@ def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> 
     """Write a checkpoint of ``arrays`` and ``meta``; returns the new step's directory."""
     root = checkpoint_dir(out_dir).resolve()
     _check_writable(root)
-    target = root / _fresh_name(root, step, _in_force(root))
+    previous = _in_force(root)
+    target = root / _fresh_name(root, step, previous)
     if target.exists():  # an unreferenced leftover of an interrupted save
         shutil.rmtree(target)
     failure = None
@@ -232,6 +238,7 @@ def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> 
                     thread.join(timeout=max(0.0, deadline - time.monotonic()))
                 gc.collect()  # orbax's failed tasks are reported (to nobody) here, not at exit
         if failure is None:
+            mf.write_manifest(target, step, meta)
             _fsync_tree(target)
             atomic_write_text(root / LATEST,
                               json.dumps({"step": step, "path": target.name, "meta": meta}))
@@ -241,17 +248,25 @@ def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> 
         if _in_force(root) != target.name:
             shutil.rmtree(target, ignore_errors=True)
         raise CheckpointError(failure)
-    _prune(root, keep=target.name)
+    _prune(root, keep=(target.name, previous))
     return target
 
 
-def load_meta(out_dir: str | Path) -> dict | None:
-    """``latest.json``'s content (None when there is none); a damaged one is refused in one
-    line naming the file."""
-    latest = checkpoint_dir(out_dir) / LATEST
+def load_meta(out_dir: str | Path, step: str | None = None) -> dict | None:
+    """``latest.json``'s content, or ``step``'s (a step name: its manifest), or, without
+    ``latest.json``, the newest step's with a readable manifest (None when there is
+    none); a damaged one is refused in one line naming the file."""
+    root = checkpoint_dir(out_dir)
+    latest = root / LATEST
+    if step is not None:
+        return _from_manifest(root, step)
     if not latest.exists():
+        for found in mf.steps_newest_first(root):
+            info = _step_info(found)
+            if info is not None:
+                return info
         return None
-    fix = "restore it from a backup, or start again with --overwrite"
+    fix = "restore it from a backup, resume a step with --resume-from STEP, or start again with --overwrite"
     try:
         info = json.loads(latest.read_text())
     except (OSError, ValueError) as err:
@@ -259,19 +274,53 @@ def load_meta(out_dir: str | Path) -> dict | None:
                               f"{fix}") from None
     ok = (isinstance(info, dict) and isinstance(info.get("path"), str)
           and isinstance(info.get("meta"), dict) and isinstance(info["meta"].get("run"), dict)
-          and isinstance(info["meta"].get("host"), dict))
+          and isinstance(info["meta"].get("host"), dict)
+          and isinstance(info["meta"]["run"].get("seeds", []), list))
     if not ok:
         raise CheckpointError(f"{latest} is not a smjax checkpoint index (missing path/meta); {fix}")
-    if not (checkpoint_dir(out_dir) / info["path"]).is_dir():
+    if not (root / info["path"]).is_dir() or "/" in info["path"]:
         raise CheckpointError(f"{latest} points at {info['path']}, which does not exist; {fix}")
+    manifest = mf.read_manifest(root / info["path"])
+    if manifest is not None and manifest["meta"] != info["meta"]:
+        raise CheckpointError(f"{latest} does not match the manifest of {info['path']} (it was "
+                              f"edited or damaged); {fix}")
     return info
 
 
-def shared_meta(out_dir: str | Path) -> dict | None:
+def _step_info(step_dir: Path) -> dict | None:
+    manifest = mf.read_manifest(step_dir)
+    if manifest is None:
+        return None
+    return {"step": manifest["step"], "path": step_dir.name, "meta": manifest["meta"]}
+
+
+def _from_manifest(root: Path, step: str) -> dict:
+    name = step if str(step).startswith("step-") else f"step-{step}"
+    info = _step_info(root / name) if "/" not in name and (root / name).is_dir() else None
+    if info is None:
+        kept = ", ".join(p.name for p in mf.steps_newest_first(root)) or "none"
+        raise CheckpointError(f"no intact checkpoint step {name} in {root} (steps there: {kept})")
+    return info
+
+
+def verify_step(out_dir: str | Path, info: dict) -> None:
+    """Refuse a step whose files differ from its manifest, naming it and what else is kept."""
+    root = checkpoint_dir(out_dir)
+    manifest = mf.read_manifest(root / info["path"])
+    problem = "it has no manifest" if manifest is None else mf.damage(root / info["path"], manifest)
+    if problem is None or (manifest is None and info["meta"].get("format", 1) < 5):
+        return  # intact, or written before steps carried manifests
+    others = [p.name for p in mf.steps_newest_first(root) if p.name != info["path"]]
+    offer = (f"resume the previous step with --resume-from {others[0]}" if others else
+             "no other step is kept: start again with --overwrite")
+    raise CheckpointError(f"checkpoint {info['path']} in {root} is corrupt ({problem}); {offer}")
+
+
+def shared_meta(out_dir: str | Path, step: str | None = None) -> dict | None:
     """``load_meta`` as process 0 sees it, on every process (collective when several)."""
     if not dist.is_multiprocess():
-        return load_meta(out_dir)
-    return dist.broadcast_json(load_meta(out_dir) if dist.is_writer() else None)
+        return load_meta(out_dir, step)
+    return dist.broadcast_json(load_meta(out_dir, step) if dist.is_writer() else None)
 
 
 def check_format(out_dir: str | Path, meta: dict, oldest: int, newest: int) -> int:
@@ -287,12 +336,13 @@ def check_format(out_dir: str | Path, meta: dict, oldest: int, newest: int) -> i
                           f"be resumed by this one")
 
 
-def load_arrays(out_dir: str | Path, like: Any) -> Any:
+def load_arrays(out_dir: str | Path, like: Any, step: str | None = None) -> Any:
     import orbax.checkpoint as ocp
 
-    info = load_meta(out_dir)
+    info = load_meta(out_dir, step)
     if info is None:
         raise FileNotFoundError(f"no checkpoint in {checkpoint_dir(out_dir)}")
+    verify_step(out_dir, info)
     if dist.is_multiprocess():
         # process 0 alone reads, into host numpy (``like`` holds numpy), then broadcasts
         abstract = _flat(like)

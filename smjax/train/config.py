@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from smjax.options.memory import POLICY_MEMORIES
+from smjax.train.bounds import (BoundsError, check_agent, checked_fields, short, short_message,
+                                strict_json, strict_yaml)
 
 METHODS = ("top-down", "bottom-up", "flat")
 ALGOS = ("ppo", "dqn", "actor-critic")
@@ -217,65 +219,39 @@ class TrainConfig:
     levels: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        try:  # numpy scalars become Python numbers; every bound is in one table
+            values = checked_fields({f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
+        except BoundsError as err:
+            raise ConfigError(str(err)) from None
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
         self.validate()
 
     def validate(self) -> None:
         def need(ok: bool, name: str, allowed: str) -> None:
             if not ok:
-                raise ConfigError(f"config field {name!r} = {getattr(self, name)!r}: must be {allowed}")
+                raise ConfigError(f"config field {name!r} = {short(getattr(self, name))}: must "
+                                  f"be {allowed}")
 
+        try:
+            checked_fields({f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
+        except BoundsError as err:
+            raise ConfigError(str(err)) from None
         need(self.method in METHODS, "method", f"one of {METHODS}")
         need(self.algo in ALGOS, "algo", f"one of {ALGOS}")
         need(self.hierarchy is None or isinstance(self.hierarchy, str), "hierarchy", "a name or None")
-        for name in ("num_envs", "rollout_ticks", "updates_per_chunk", "success_window",
-                     "max_episodes_per_level", "eval_envs", "eval_max_ticks", "gate_envs",
-                     "gate_max_ticks", "gate_interval", "finetune_turn_episodes",
-                     "finetune_max_episodes"):
-            value = getattr(self, name)
-            need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, name,
-                 "an integer >= 1")
-        for name in ("finetune_max_rest", "finetune_plateau_episodes"):
-            value = getattr(self, name)
-            need(isinstance(value, int) and not isinstance(value, bool) and value >= 0, name,
-                 "an integer >= 0")
-        need(isinstance(self.finetune_plateau_gain, (int, float))
-             and not isinstance(self.finetune_plateau_gain, bool)
-             and 0 <= self.finetune_plateau_gain <= 1, "finetune_plateau_gain", "in [0, 1]")
-        need(self.reset_pool is None or (isinstance(self.reset_pool, int)
-                                         and not isinstance(self.reset_pool, bool)
-                                         and self.reset_pool >= 0),
-             "reset_pool", "an integer >= 0, or null for num_envs")
         need(self.policy_memory in POLICY_MEMORIES, "policy_memory", f"one of {POLICY_MEMORIES}")
         need(self.frozen_eval in ("auto", "learned", "all"), "frozen_eval",
              "one of ('auto', 'learned', 'all')")
-        need(isinstance(self.threshold, (int, float)) and 0 < self.threshold <= 1, "threshold",
-             "in (0, 1]")
-        need(isinstance(self.ceiling_fraction, (int, float))
-             and not isinstance(self.ceiling_fraction, bool)
-             and 0 < self.ceiling_fraction <= 1, "ceiling_fraction", "in (0, 1]")
         need(self.finetune in FINETUNE_CHOICES, "finetune", f"one of {FINETUNE_CHOICES}")
         need(self.finetune_mode in FINETUNE_MODES, "finetune_mode", f"one of {FINETUNE_MODES}")
-        for name in ("finetune_threshold", "finetune_option_threshold"):
-            value = getattr(self, name)
-            need(isinstance(value, (int, float)) and not isinstance(value, bool)
-                 and 0 < value <= 1, name, "in (0, 1]")
-        need(isinstance(self.gamma, (int, float)) and 0 < self.gamma <= 1, "gamma", "in (0, 1]")
         need(self.frozen_policy in FROZEN_POLICIES, "frozen_policy", f"one of {FROZEN_POLICIES}")
-        need(isinstance(self.option_temperature, (int, float))
-             and not isinstance(self.option_temperature, bool)
-             and 0 < self.option_temperature <= 10, "option_temperature", "in (0, 10]")
-        need(isinstance(self.checkpoint_every, (int, float)) and self.checkpoint_every >= 0,
-             "checkpoint_every", ">= 0 seconds")
         need(isinstance(self.tensorboard, bool), "tensorboard", "true or false")
         need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
         need(isinstance(self.gate, bool), "gate", "true or false")
         need(isinstance(self.finetune_side_cost, bool), "finetune_side_cost", "true or false")
         need(isinstance(self.finetune_continue_episodes, bool), "finetune_continue_episodes",
              "true or false")
-        for name in ("finetune_side_cost_weight", "level_side_cost_weight"):
-            value = getattr(self, name)
-            need(isinstance(value, (int, float)) and not isinstance(value, bool)
-                 and 0 <= value <= 100, name, "a number in [0, 100]")
         need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
         need(isinstance(self.finetune_agent, dict) and all(
             isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
@@ -285,8 +261,7 @@ class TrainConfig:
             raise ConfigError(f"agent field 'gamma' = {self.agent['gamma']!r} would be ignored: the "
                               f"discount is the config field 'gamma'; set it with --set gamma=X "
                               f"(TrainConfig(gamma=X))")
-        need(isinstance(self.max_steps_per_level, int) and not isinstance(self.max_steps_per_level, bool)
-             and self.max_steps_per_level >= 0, "max_steps_per_level", "an integer >= 0 (0: no step budget)")
+        self._check_agent()
         need(isinstance(self.levels, dict) and all(isinstance(k, str) and isinstance(v, dict)
                                                    for k, v in self.levels.items()),
              "levels", "a mapping of template name -> {field: value}")
@@ -307,6 +282,24 @@ class TrainConfig:
             except ConfigError as err:
                 raise ConfigError(f"config field 'levels' for template {name!r}: {err} (set both "
                                   f"in levels[{name!r}] if only this level differs)") from None
+
+    def _check_agent(self) -> None:
+        """The learner's fields (unknown ones too), the fine-tuning overrides on top of them,
+        and what the run's batch bounds (``bounds.check_agent``)."""
+        from smjax.agents import make_config
+
+        if self.algo not in ALGOS:
+            return
+        try:
+            agent = normalize_agent(self.algo, self.agent)
+            config = make_config(self.algo, **agent)
+            check_agent(config, self.num_envs, self.rollout_ticks)
+        except (ValueError, TypeError) as err:
+            raise ConfigError(short_message(str(err))) from None
+        try:
+            make_config(self.algo, **(agent | normalize_agent(self.algo, self.finetune_agent)))
+        except (ValueError, TypeError) as err:
+            raise ConfigError(short_message(f"config field 'finetune_agent': {err}")) from None
 
     @property
     def finetune_on(self) -> bool:
@@ -351,7 +344,7 @@ class TrainConfig:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names, key=repr)  # key=repr: keys may be of any type
         if unknown:
-            raise ConfigError(f"unknown config field(s) {unknown}; valid fields: {sorted(names)}")
+            raise ConfigError(f"unknown config field(s) {short(unknown)}; valid fields: {sorted(names)}")
         return cls(**_parsed_fields(cls, data))
 
     @classmethod
@@ -405,7 +398,7 @@ def read_config_file(path: str | Path) -> dict:
         raise ConfigError(f"config file {path} {what}; pass a YAML or JSON file of TrainConfig fields")
     try:  # undecodable bytes and syntax errors become one error type naming the file
         text = path.read_text()
-        data = yaml.safe_load(text) if path.suffix in (".yaml", ".yml") else json.loads(text)
+        data = strict_yaml(text) if path.suffix in (".yaml", ".yml") else strict_json(text)
     except (OSError, ValueError, yaml.YAMLError) as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         raise ConfigError(f"config file {path} cannot be read or parsed: {first}") from None

@@ -33,6 +33,7 @@ from smjax.train import distributed as dist
 from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig
 from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
 from smjax.train.levels import LevelPhase
+from smjax.train.manifest import check_host
 from smjax.train.plans import LevelPlan, plan_levels
 from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
@@ -40,8 +41,9 @@ from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 
 
 # 2: learner states carry their hyper-parameters (state.hp); 3: success windows are arrays;
-# 4: the levels' bank (fine-tuning hands back the better hierarchy)
-CHECKPOINT_FORMAT = 4
+# 4: the levels' bank (fine-tuning hands back the better hierarchy); 5: every step carries
+# a manifest of checksums (the arrays are laid out as in 4)
+CHECKPOINT_FORMAT = 5
 
 
 class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
@@ -116,27 +118,33 @@ class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
             return
         # the settings a resume starts from unless told otherwise (not the run's identity)
         settings = {k: getattr(self.cfg, k) for k in RUN_SETTINGS}
+        # trained: every stage is done, so a resume only evaluates and writes results
         meta = {"host": self.state.to_json(), "run": self.run_meta, "settings": settings,
-                "format": CHECKPOINT_FORMAT}
+                "format": CHECKPOINT_FORMAT, "trained": not self._training()}
         arrays = dist.gather(self.arrays) if dist.is_multiprocess() else self.arrays
         if self.writer:
             ckpt.save_checkpoint(self.out_dir, self.state.chunks, arrays, meta)
         self._last_save = time.perf_counter()
 
-    def restore(self) -> bool:
-        """Resume from process 0's checkpoint (formats 2 and 3 are migrated); the same on
-        every process."""
-        info = ckpt.shared_meta(self.out_dir) if self.out_dir is not None else None
+    def restore(self, step: str | None = None) -> bool:
+        """Resume from process 0's checkpoint (its latest, or ``step``; formats 2 and 3 are
+        migrated), verified against its manifest and the plan; the same on every process."""
+        info = ckpt.shared_meta(self.out_dir, step) if self.out_dir is not None else None
         if info is None:
             return False
         version = ckpt.check_format(self.out_dir, info["meta"], 2, CHECKPOINT_FORMAT)
+        problem = check_host(info["meta"]["host"], len(self.seeds), self.num_stages)
+        if problem:
+            raise ckpt.CheckpointError(f"checkpoint {info['path']} in "
+                                       f"{ckpt.checkpoint_dir(self.out_dir)} cannot belong to "
+                                       f"this run: {problem}")
         like = self.arrays.as_stored(version)
         if dist.is_multiprocess():
             like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), like)
-            loaded = ckpt.load_arrays(self.out_dir, like) if self.writer else like
+            loaded = ckpt.load_arrays(self.out_dir, like, step) if self.writer else like
             loaded = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
         else:
-            loaded = ckpt.load_arrays(self.out_dir, like)
+            loaded = ckpt.load_arrays(self.out_dir, like, step)
         self.arrays = loaded.migrated(info["meta"]["host"], self.cfg.window_slots,
                                       levels_bank=self.arrays.levels_bank is not None)
         self.state = TrainerState.from_json(info["meta"]["host"])

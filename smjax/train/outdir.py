@@ -6,22 +6,29 @@ and start time). The lock is an ``flock`` on that file, so the kernel releases i
 the owner exits in any way (SIGKILL included); a lock file whose lock is free is
 therefore stale, and it is named when a new run takes it over. A directory that already
 holds a run's files (results, curves, checkpoints) is refused unless the caller resumes
-it or asks to overwrite it, so nothing is replaced without a word.
+it or asks to overwrite it, so nothing is replaced without a word; ``--overwrite`` then
+deletes exactly the files the refusal named (inside ``checkpoints``, only smjax's own).
+
+Nothing is written or deleted through a symbolic link: a run file, the lock or a probe
+that is a link is refused (a planted link would otherwise redirect a write, or a delete,
+outside ``--out``), and the lock and probe files are created with ``O_NOFOLLOW``.
 """
 from __future__ import annotations
 
+import contextlib
 import errno
 import fcntl
 import json
 import os
 import shutil
 import socket
+import stat
 import sys
 import time
 from pathlib import Path
 
 LOCK_NAME = ".smjax.lock"
-# what a run writes into its directory; --overwrite deletes exactly these
+# what a run writes into its directory; --overwrite deletes those of them found
 RUN_FILES = ("results.json", "curves.csv", "curves.png", "checkpoints", "tensorboard",
              "sweep.json")
 
@@ -39,21 +46,40 @@ class NothingToResumeError(OutDirError, FileNotFoundError):
 
 
 def check_out_dir(out: Path) -> None:
-    """Refuse a path that can never hold a run: a file, uncreatable, not writable."""
-    if out.exists() and not out.is_dir():
-        raise OutDirError(f"--out {out} is a file, not a directory; choose a directory")
+    """Refuse a path that can never hold a run: empty, a file, uncreatable, not writable."""
+    if not str(out).strip():
+        raise OutDirError("--out is empty (an unset shell variable?); name a directory")
     try:
+        if out.exists() and not out.is_dir():
+            raise OutDirError(f"--out {out} is a file, not a directory; choose a directory")
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
-        raise OutDirError(f"--out {out} cannot be created ({err.strerror or err}); choose a "
-                          f"writable location") from None
-    probe = out / f".smjax-write-probe-{os.getpid()}"
+        raise OutDirError(f"--out {str(out)[:200]} cannot be created ({err.strerror or err}); "
+                          f"choose a writable location") from None
     try:
-        probe.write_bytes(b"")
-        probe.unlink()
+        probe_file(out / f".smjax-write-probe-{os.getpid()}")
     except OSError as err:
         raise OutDirError(f"--out {out} is not writable ({err.strerror or err}); fix its "
                           f"permissions or choose another directory") from None
+
+
+def probe_file(path: Path) -> None:
+    """Create and remove an empty file at ``path``, never through a planted link."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+    os.close(fd)
+    os.unlink(path)
+
+
+def check_no_links(out: Path) -> None:
+    """Refuse run files (and the checkpoints' entries) that are symbolic links: the run
+    would write, or ``--overwrite`` delete, wherever they lead."""
+    names = [LOCK_NAME] + _run_names(out)
+    if (out / "checkpoints").is_dir() and not (out / "checkpoints").is_symlink():
+        names += [f"checkpoints/{c.name}" for c in (out / "checkpoints").iterdir()]
+    for name in names:
+        if (out / name).is_symlink():
+            raise OutDirError(f"{out / name} is a symbolic link; a run never writes or deletes "
+                              f"through links: remove it, or choose another --out")
 
 
 def _holds_checkpoint(folder: Path) -> bool:
@@ -67,7 +93,7 @@ def _holds_checkpoint(folder: Path) -> bool:
 def _run_names(out: Path) -> list[str]:
     """RUN_FILES plus a sweep's ``point-<k>`` folders (those holding a results.json)."""
     points = sorted(p.name for p in out.glob("point-*")
-                    if p.name[6:].isdigit() and (p / "results.json").is_file())
+                    if p.name[6:].isdigit() and (p.is_symlink() or (p / "results.json").is_file()))
     return list(RUN_FILES) + points
 
 
@@ -84,14 +110,34 @@ def existing_run_files(out: Path) -> list[str]:
     return found
 
 
-def clear_run_files(out: Path) -> None:
-    """``--overwrite``: remove the previous run's files (nothing else in the directory)."""
-    for name in _run_names(out):
+def _smjax_checkpoint_entry(name: str) -> bool:
+    """What ``smjax.train.checkpoint`` writes into ``checkpoints``."""
+    return (name == "latest.json" or name.startswith(("step-", ".latest.json.", ".write-probe-"))
+            or ".orbax-checkpoint-tmp" in name)
+
+
+def clear_run_files(out: Path, found: list[str]) -> None:
+    """``--overwrite``: remove the run files the refusal named (``found``), nothing else;
+    in ``checkpoints`` only smjax's own entries (another tool's files there stay)."""
+    for name in found:
         p = out / name
-        if p.is_dir():
-            shutil.rmtree(p)
-        elif p.exists():
-            p.unlink()
+        if p.is_symlink():  # (check_no_links refuses these first)
+            raise OutDirError(f"{p} is a symbolic link; remove it yourself")
+        if name == "checkpoints":
+            for entry in p.iterdir():
+                if _smjax_checkpoint_entry(entry.name):
+                    _remove(entry)
+            with contextlib.suppress(OSError):
+                p.rmdir()  # only if nothing else is left in it
+        else:
+            _remove(p)
+
+
+def _remove(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p)
+    else:
+        p.unlink(missing_ok=True)
 
 
 class DirLock:
@@ -104,7 +150,7 @@ class DirLock:
 
     def acquire(self) -> "DirLock":
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = self._open()
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as err:
@@ -120,6 +166,28 @@ class DirLock:
         _write_owner(fd)
         self.fd = fd
         return self
+
+    def _open(self) -> int:
+        """The lock file, created exclusively, or (a stale one) opened; never a link, a
+        FIFO or anything but a regular file."""
+        try:
+            return os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+        except FileExistsError:
+            pass
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK)
+        except FileNotFoundError:  # released between the two opens: create it afresh
+            return self._open()
+        except OSError as err:
+            if err.errno == errno.ELOOP:
+                raise OutDirError(f"{self.path} is a symbolic link, not a smjax lock; remove it "
+                                  f"(a run never writes through links)") from None
+            raise OutDirError(f"{self.path} cannot be opened ({err.strerror or err}); remove "
+                              f"it") from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise OutDirError(f"{self.path} is not a regular file, not a smjax lock; remove it")
+        return fd
 
     def release(self) -> None:
         if self.fd is None:
@@ -176,6 +244,8 @@ def prepare_out_dir(out: str | Path, *, resume: bool, overwrite: bool) -> DirLoc
     the directory is unusable, locked by a live run, or holds a run that is neither
     resumed nor to be overwritten.
     """
+    if not str(out).strip():
+        raise OutDirError("--out is empty (an unset shell variable?); name a directory")
     out = Path(out)
     if resume and overwrite:
         raise OutDirError("--resume and --overwrite contradict each other; pass one of them")
@@ -189,13 +259,14 @@ def prepare_out_dir(out: str | Path, *, resume: bool, overwrite: bool) -> DirLoc
             o = lock.stale_owner
             print(f"note: took over the stale lock of {out} (pid {o.get('pid')} on host "
                   f"{o.get('host')} is gone)", file=sys.stderr)
+        check_no_links(out)
         found = existing_run_files(out)
         if found and not resume:
             if not overwrite:
                 raise RunExistsError(
                     f"{out} already holds a run ({', '.join(found)}); pass --resume to continue "
                     f"it, --overwrite to replace it, or choose another output directory")
-            clear_run_files(out)
+            clear_run_files(out, found)
     except BaseException:
         lock.release()
         raise

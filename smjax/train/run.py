@@ -51,9 +51,14 @@ LEGACY_VALUES = {"finetune_continue_episodes": False, "finetune_mode": "turns",
                  "finetune_plateau_episodes": 0}
 
 
-def check_resumable(out_dir, identity: dict) -> bool:
+# evaluation-only settings: a resume of a trained run (every stage done) may change them,
+# e.g. to write the results that an evaluation of too many ticks could not
+EVAL_SETTINGS = ("eval_envs", "eval_max_ticks")
+
+
+def check_resumable(out_dir, identity: dict, step: str | None = None) -> bool:
     """True if ``out_dir`` holds a checkpoint of this very run; refuse a different one."""
-    info = ckpt.shared_meta(out_dir)
+    info = ckpt.shared_meta(out_dir, step)
     if info is None:
         return False
     # a config field added since the checkpoint was written takes its default there (a new
@@ -61,7 +66,8 @@ def check_resumable(out_dir, identity: dict) -> bool:
     # changed that behaviour, the value the older versions ran with (``LEGACY_VALUES``)
     saved = TrainConfig().to_dict() | LEGACY_VALUES | info["meta"]["run"]
     # (checkpoints of older versions recorded RUN_SETTINGS in the identity too)
-    diff = [k for k in config_differences(saved, identity) if k not in RUN_SETTINGS]
+    free = RUN_SETTINGS + (EVAL_SETTINGS if info["meta"].get("trained") else ())
+    diff = [k for k in config_differences(saved, identity) if k not in free]
     if diff:
         details = ", ".join(f"{k}: checkpoint {saved.get(k)!r} vs now {identity.get(k)!r}" for k in diff)
         raise ConfigError(f"cannot resume {out_dir}: the run differs in {details}")
@@ -88,7 +94,7 @@ def _claim_out_dir(out_dir, resume: bool, overwrite: bool) -> DirLock | None:
 def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None = None, *,
         env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
         overwrite: bool = False, sweep: dict | None = None,
-        hierarchy: Hierarchy | str | None = None) -> dict:
+        hierarchy: Hierarchy | str | None = None, resume_from: str | None = None) -> dict:
     """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
 
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
@@ -112,6 +118,9 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     (:mod:`smjax.train.sweep`) and returns ``{"points": [{"overrides", "results"}, ...],
     "compile_seconds"}``; a point's results are those of its run alone. With ``out_dir``
     it writes sweep.json there and each point's files under ``point-<k>/``.
+
+    ``resume_from`` (with ``resume``): a checkpoint step to resume instead of the latest
+    (``"step-30"``), e.g. the previous good one where the latest is corrupt.
     """
     enable_compilation_cache()  # a second run of the same programs skips compiling
     TIMELINE.listen_to_jax()
@@ -130,11 +139,13 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
         sweep = normalize_sweep(cfg, make_agent(cfg.algo, **cfg.agent), sweep)
     if resume and out_dir is None:
         raise ValueError("resume needs the run's output directory")
+    if resume_from is not None and not resume:
+        raise ValueError("resume_from (--resume-from) needs resume (--resume DIR)")
     with TIMELINE.span("output directory check and lock"):
         lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
     try:
         return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume, sweep,
-                           hierarchy)
+                           hierarchy, resume_from)
     finally:
         if lock is not None:
             lock.release()
@@ -142,7 +153,7 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
 
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides: dict,
                 progress: bool, resume: bool, sweep: dict | None,
-                given: Hierarchy | None = None) -> dict:
+                given: Hierarchy | None = None, resume_from: str | None = None) -> dict:
     points = sweep_points(sweep) if sweep is not None else None
     with TIMELINE.span("environment, learner and hierarchy"):
         if isinstance(task, str):
@@ -164,11 +175,11 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     if sweep is not None:  # a checkpoint of a sweep resumes only that sweep
         identity["sweep"] = sweep
     # with several processes process 0's view of out_dir decides, so all raise alike
-    existing = ckpt.shared_meta(out_dir) if out_dir is not None else None
+    existing = ckpt.shared_meta(out_dir, resume_from) if out_dir is not None else None
     if resume:
         if existing is None:
             raise FileNotFoundError(f"nothing to resume: no checkpoint in {ckpt.checkpoint_dir(out_dir)}")
-        check_resumable(out_dir, identity)
+        check_resumable(out_dir, identity, resume_from)
     elif existing is not None:  # (prepare_out_dir refuses this first; kept for safety)
         raise FileExistsError(
             f"{out_dir} already holds a checkpointed run; pass resume (--resume) to continue it "
@@ -184,7 +195,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
                                    progress=progress, run_meta=identity, hp=hp, gamma=gamma)
     if resume:
         with TIMELINE.span("checkpoint restore"):
-            trainer.restore()
+            trainer.restore(resume_from)
     try:
         raw = trainer.run()
     except NonFiniteError as err:

@@ -15,16 +15,22 @@ that lists the sweepable ones.
 from __future__ import annotations
 
 import itertools
+import math
 from typing import Any
 
 import jax
 
 from smjax.core.overrides import parse_float
+from smjax.train.bounds import short
 from smjax.train.config import ConfigError, TrainConfig
 
 PREFIX = "agent."
 # TrainConfig fields that are traced per slot (the engine's chunk takes them per seed)
 TRAIN_SWEEPABLE = ("gamma",)
+
+
+# points of one sweep at most (each is a slot of every seed, like a seed)
+MAX_POINTS = 4096
 
 
 def sweepable_names(agent) -> list[str]:
@@ -85,8 +91,14 @@ def normalize_sweep(cfg: TrainConfig, agent, sweep: dict) -> dict[str, list[floa
             if bad:
                 raise ConfigError(f"sweep {key}: needs integer values, got {bad[0]!r}")
             lists[key] = [int(v) for v in lists[key]]
+        if len(set(lists[key])) != len(lists[key]):  # a point trained twice over
+            raise ConfigError(f"sweep {key}: lists a value twice ({short(values)}); list each once")
         for v in lists[key]:
             _check_value(cfg, key, v)
+    count = math.prod(len(v) for v in lists.values())
+    if count > MAX_POINTS:  # each point is a slot of every seed: the program grows with them
+        raise ConfigError(f"the sweep has {count} points (the product of its lists); at most "
+                          f"{MAX_POINTS} train in one program")
     return lists
 
 
