@@ -18,6 +18,9 @@ Commands:
           results.json, curves.csv and curves.png to --out
   bench   environment steps per second (one JSON line)
   list    the registered tasks (ENV/TASK) and, with --hierarchies, their hierarchies
+
+Your own environment: a module that calls smjax.core.register("ENV/TASK", factory) when
+imported; name the task MODULE:ENV/TASK, or pass --import MODULE to any command.
   plot    overlay learning curves of several runs
   render  write a GIF of an episode (random policy, or a trained hierarchy with --policy)
 
@@ -25,6 +28,7 @@ Examples:
   smjax train craft/get_wood --seeds 2 --out runs/wood
   smjax train craft/get_gem --method top-down --algo ppo --seeds 10 --out runs/gem
   smjax bench craft/get_gem --num-envs 4096 --steps 200
+  smjax train mypkg.envs:keydoor/find_treasure --out runs/treasure
 
 Several hosts (run the same command on each, changing --process-id):
   smjax train craft/get_gem --seeds 16 --out runs/gem --coordinator 10.0.0.1:1234 \
@@ -35,6 +39,17 @@ Several hosts (run the same command on each, changing --process-id):
 def _add_debug(p) -> None:
     p.add_argument("--debug", action="store_true",
                    help="show the full traceback of an error instead of one line")
+    p.add_argument("--import", dest="imports", action="append", metavar="MODULE", default=[],
+                   help="import MODULE first: a module of yours that registers tasks with "
+                        "smjax.core.register (searched in the installed packages, then the "
+                        "working directory); or name the task MODULE:ENV/TASK")
+
+
+def _import_user_modules(args) -> None:
+    from smjax.core.registry import import_env_module
+
+    for module in getattr(args, "imports", None) or []:
+        import_env_module(module)
 
 
 def _add_train(sub):
@@ -45,7 +60,8 @@ def _add_train(sub):
                                    "Every TrainConfig field can be set with --set FIELD=VALUE or a "
                                    "--config YAML/JSON file; learner hyper-parameters with "
                                    "--agent KEY=VALUE.")
-    p.add_argument("task", help="registered task, e.g. craft/get_gem (see `smjax list`)")
+    p.add_argument("task", help="registered task, e.g. craft/get_gem (see `smjax list`), or "
+                                "your own as MODULE:ENV/TASK, e.g. mypkg.envs:keydoor/find_treasure")
     p.add_argument("--method", choices=METHODS, default=None, help="default: top-down")
     p.add_argument("--algo", choices=ALGOS, default=None, help="learner for every level (default: ppo)")
     p.add_argument("--seeds", type=int, default=None, help="number of seeds (0..N-1, shifted by --seed-offset; default 1)")
@@ -199,6 +215,7 @@ def _cmd_render(args) -> int:
 def _run_command(command, args) -> int:
     """Run a command; a user's mistake is one line on stderr and exit code 2."""
     try:
+        _import_user_modules(args)
         return command(args)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

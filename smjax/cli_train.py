@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import errno
 import json
+import re
 import socket
 import sys
 import time
@@ -187,7 +188,8 @@ def cmd_train(args) -> int:
         env_over["fixed_map"] = True
     seeds = choose_seeds(args, saved)
     sweep = choose_sweep(args, saved)
-    out = args.resume or args.out or f"runs/{args.task.replace('/', '_')}_{cfg.method}"
+    safe_task = re.sub(r"[^\w.-]", "_", args.task)  # MODULE:ENV/TASK holds ':' and '/'
+    out = args.resume or args.out or f"runs/{safe_task}_{cfg.method}"
     slots = len(seeds) * _num_points(sweep)
     args._batch = f"{slots} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
     results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
