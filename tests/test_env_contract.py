@@ -195,6 +195,14 @@ class WildControllerKeyDoor(KeyDoor):
                                        controller=lambda k, s, p: jnp.asarray(7))}
 
 
+class NanRewardCorridor(Corridor):
+    """Rewards NaN on every step."""
+
+    def step_env(self, key, state, action, params):
+        obs, state, reward, term, trunc, info = super().step_env(key, state, action, params)
+        return obs, state, reward + jnp.nan, term, trunc, info
+
+
 class GridPastTheEndCorridor(Corridor):
     """Declares an observation grid that runs past the observation's end."""
 
@@ -216,8 +224,9 @@ class BlankTextCorridor(Corridor):
     (BatchSensitiveCorridor(), r"vmap == loop failed for tests/corridor: step 0, env 0: "
                                r"leaf \[2\]"),  # the reward
     (NoResetCorridor(), "auto-reset failed for tests/corridor"),
+    (NanRewardCorridor(), "reward finite failed for tests/corridor: reward at step 0, env 0 is nan"),
 ], ids=["obs-outside-space", "blank-describe", "grid-past-the-end", "vmap-differs",
-        "no-auto-reset"])
+        "no-auto-reset", "nan-reward"])
 def test_broken_env_is_named(env, match):
     with pytest.raises(AssertionError, match=match):
         check_env(env, env.default_params, **SMALL)

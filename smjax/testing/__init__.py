@@ -11,6 +11,7 @@ with the property's name and names the environment):
 * ``determinism``: the same key gives the same rollout, bit for bit;
 * ``observation finite`` / ``observation in space``: every observation (reset, step and
   ``info["final_observation"]``) is finite and inside ``observation_space(params)``;
+* ``reward finite``: every reward of the rollout is finite (no NaN or inf);
 * ``vmap == loop``: vmapped ``reset``/``step`` equal the single environment's, env by env;
 * ``auto-reset``: when an episode ends, ``step`` returns the observation and state that
   ``reset_env`` gives for the second half of ``jax.random.split(key)`` (what

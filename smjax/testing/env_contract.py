@@ -156,6 +156,16 @@ def check_observations(reset_obs, traj, obs_space: spaces.Space, who: str) -> No
                  f"outside {obs_space!r} (min {bad.min()}, max {bad.max()})")
 
 
+def check_rewards(traj, who: str) -> None:
+    """Every reward of the rollout is finite: a NaN would reach the learner's update."""
+    reward = np.asarray(traj[3][2])
+    finite = np.isfinite(reward)
+    if not finite.all():
+        t, i = np.argwhere(~finite)[0]
+        fail("reward finite", who, f"reward at step {t}, env {i} is {reward[t, i]} "
+             f"({int((~finite).sum())} of {finite.size} rewards are non-finite)")
+
+
 def check_vmap_loop(params, key_roll, rollout_out, one, times, who: str) -> None:
     """The batched rollout, env by env, equals single-environment reset and steps."""
     (reset_obs, reset_state), (states, actions, keys, out) = rollout_out
@@ -255,6 +265,7 @@ def _check_env(env, params, num_envs: int, steps: int, key, render: bool) -> Non
     assert_trees_close(rollout(key_roll, params), first, prop="determinism", who=who,
                        exact=True, where="two rollouts with the same key")
     check_observations(reset_obs, traj, obs_space, who)
+    check_rewards(traj, who)
     check_vmap_loop(params, key_roll, first, one, _spread(steps), who)
     if not _any_done(traj):
         short = short_params(params, steps)
@@ -266,6 +277,7 @@ def _check_env(env, params, num_envs: int, steps: int, key, render: bool) -> Non
             fail("auto-reset", who, f"no episode ended in {steps} steps, even with "
                  f"max_steps={max(1, steps // 4)}")
         check_observations(reset_obs, traj, obs_space, who)
+        check_rewards(traj, who)
         params = short
     check_auto_reset(env, params, traj, one, who)
     if render:
