@@ -187,6 +187,18 @@ class WrongDoorKeyDoor(KeyDoor):
                                            initiation=good.initiation, teleport=to_door)}
 
 
+class WrongOpenKeyDoor(KeyDoor):
+    """open_door, initiable only with the key, teleports beside the door and does nothing."""
+
+    def templates(self):
+        def beside_door(key, state, params):
+            return state.replace(pos=jnp.maximum(state.door_pos - 1, 0)), jnp.asarray(0)
+
+        return super().templates() | {"open_door": OptionTemplate(
+            name="open_door", satisfied=lambda s, p: s.opened, k_max=12,
+            initiation=lambda s, p: s.has_key & ~s.opened, teleport=beside_door)}
+
+
 class WildControllerKeyDoor(KeyDoor):
     """A controller that returns action 7 of Discrete(3)."""
 
@@ -250,6 +262,25 @@ def test_broken_teleport_and_controller_are_named():
     with pytest.raises(AssertionError, match="controller action failed for test/keydoor "
                                              "template 'walk'"):
         check_hierarchy(env, env.default_params, hierarchy, **SMALL)
+
+
+def test_a_teleport_behind_another_is_checked_on_its_outcomes():
+    # random play seldom picks up the key: the broken open_door is reached through
+    # give_key's teleport (8 states of 4 envs x 2 steps: none holds the key)
+    env = WrongOpenKeyDoor()
+    hierarchy = declare(env, "task", {"task": ["open_door", "primitives"],
+                                      "open_door": ["give_key", "primitives"]})
+    with pytest.raises(AssertionError, match="teleport outcome failed for test/keydoor "
+                                             "template 'open_door': state"):
+        check_hierarchy(env, env.default_params, hierarchy, num_envs=4, steps=2, num_states=8)
+
+
+def test_a_teleport_initiable_nowhere_is_not_passed():
+    env = WrongOpenKeyDoor()
+    hierarchy = declare(env, "task", {"task": ["open_door", "primitives"]})  # no give_key
+    with pytest.raises(AssertionError, match="teleport outcome failed for test/keydoor template "
+                                             "'open_door': not checked: .* in 0 of 8 states"):
+        check_hierarchy(env, env.default_params, hierarchy, num_envs=4, steps=2, num_states=8)
 
 
 def test_comparisons_use_tolerances_for_floats_only():

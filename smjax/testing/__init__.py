@@ -22,10 +22,11 @@ with the property's name and names the environment):
 * ``describe``: ``describe`` returns a non-empty str, or None (no text form).
 
 ``check_hierarchy(env, params, hierarchy)`` checks every template of a hierarchy on
-states reached by random play: ``template output`` (predicates are bool scalars),
+states reached by random play and by the hierarchy's own teleports: ``template output`` (predicates are bool scalars),
 ``vmap == loop`` (initiation, satisfied, failed, teleport and controller agree jitted and
 vmapped vs one state at a time), ``teleport outcome`` (where initiable, the teleport's
-outcome satisfies the template), ``teleport action``/``controller action`` (inside the
+outcome satisfies the template; a teleport initiable in none of the states fails, as
+unchecked), ``teleport action``/``controller action`` (inside the
 action space).
 
 Floats computed by two different programs (jit vs eager, vmap vs loop) are compared with
