@@ -127,10 +127,20 @@ def test_craft_worlds(task, hierarchy):
 def test_fetch_stack3():
     env, params = smjax.make("fetch/stack3", max_steps=4)
     # Rendering needs an OpenGL backend; test_fetch_render_brax.py checks it where one exists.
-    # MJX's solver leaves ~1e-6 residuals on accelerations at rest: a looser atol.
-    check_env(env, params, num_envs=2, steps=8, render=False, atol=1e-4)
-    check_hierarchy(env, params, "paper", num_envs=2, steps=8, num_states=8, loop_states=2,
-                    atol=1e-4)
+    # The tolerances are Fetch's own (contract_tolerances: MJX solver residuals).
+    check_env(env, params, num_envs=2, steps=8, render=False)
+    check_hierarchy(env, params, "paper", num_envs=2, steps=8, num_states=8, loop_states=2)
+
+
+def test_an_environment_declares_its_tolerances():
+    class Jittery(BatchSensitiveCorridor):  # rewards differ by 1 between vmap and loop
+        contract_tolerances = (0.0, 1.5)
+
+    env = Jittery()
+    check_env(env, env.default_params, **SMALL)
+    with pytest.raises(AssertionError, match="vmap == loop"):  # a given atol still wins
+        check_env(env, env.default_params, atol=1e-6, **SMALL)
+    assert smjax.make("fetch/stack1")[0].contract_tolerances[1] >= 1e-4
 
 
 @pytest.mark.slow

@@ -30,7 +30,8 @@ unchecked), ``teleport action``/``controller action`` (inside the
 action space).
 
 Floats computed by two different programs (jit vs eager, vmap vs loop) are compared with
-``RTOL``/``ATOL`` (or the ``rtol``/``atol`` a check is given): XLA fuses them differently,
+``RTOL``/``ATOL`` (or the ``rtol``/``atol`` a check is given, else the environment's
+``contract_tolerances``): XLA fuses them differently,
 which changes float32 rounding; integer and bool leaves must be equal.
 """
 from smjax.testing.compare import ATOL, RTOL, assert_trees_close, tolerances, trees_mismatch

@@ -77,6 +77,12 @@ def _make_one_env(env) -> Callable:
     return jax.jit(one)
 
 
+def env_tolerances(env, rtol: float | None, atol: float | None) -> tuple[float, float]:
+    """The tolerances given, else those the environment declares, else the defaults."""
+    declared = getattr(env, "contract_tolerances", None) or (RTOL, ATOL)
+    return (declared[0] if rtol is None else rtol, declared[1] if atol is None else atol)
+
+
 def short_params(params: Any, steps: int) -> Any | None:
     """params with ``max_steps`` cut to ``steps // 4`` so episodes end in a rollout."""
     if not hasattr(params, "max_steps") or not hasattr(params, "replace"):
@@ -235,17 +241,18 @@ def _any_done(traj) -> bool:
 
 
 def check_env(env, params: Any = None, *, num_envs: int = 8, steps: int = 64,
-              key: jax.Array | None = None, render: bool = True, rtol: float = RTOL,
-              atol: float = ATOL) -> None:
+              key: jax.Array | None = None, render: bool = True, rtol: float | None = None,
+              atol: float | None = None) -> None:
     """Check that ``env`` meets the smjax environment contract (see ``smjax.testing``).
 
     Plays ``num_envs`` environments for ``steps`` random steps. If no episode ends and
     ``params`` has a ``max_steps`` field, the auto-reset check plays again with
     ``max_steps = steps // 4``; other environments need params (or ``steps``) under which
     episodes end. ``rtol``/``atol`` bound float differences between two programs (jit vs
-    eager, vmap vs loop). Raises ``AssertionError`` whose message starts with the property.
+    eager, vmap vs loop); None: the environment's ``contract_tolerances``, else ``RTOL``/
+    ``ATOL``. Raises ``AssertionError`` whose message starts with the property.
     """
-    with tolerances(rtol, atol):
+    with tolerances(*env_tolerances(env, rtol, atol)):
         _check_env(env, params, num_envs, steps, key, render)
 
 

@@ -23,9 +23,9 @@ import numpy as np
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.template import OptionTemplate
 from smjax.testing.compare import (
-    ATOL, RTOL, all_equal, assert_trees_close, fail, index, tolerances,
+    all_equal, assert_trees_close, fail, index, tolerances,
 )
-from smjax.testing.env_contract import make_rollout
+from smjax.testing.env_contract import env_tolerances, make_rollout
 
 PREDICATES = ("initiation", "satisfied", "failed")
 
@@ -143,8 +143,8 @@ def _mix_in_outcomes(states, out: dict, key) -> Any:
 
 def check_hierarchy(env, params: Any, hierarchy: Hierarchy | str, *, num_envs: int = 8,
                     steps: int = 16, num_states: int = 32, loop_states: int = 4,
-                    key: jax.Array | None = None, rtol: float = RTOL,
-                    atol: float = ATOL) -> None:
+                    key: jax.Array | None = None, rtol: float | None = None,
+                    atol: float | None = None) -> None:
     """Check every template of ``hierarchy`` (a Hierarchy, or a name in ``env.hierarchies()``).
 
     On ``num_states`` states spread over ``steps`` random steps of ``num_envs``
@@ -165,7 +165,7 @@ def check_hierarchy(env, params: Any, hierarchy: Hierarchy | str, *, num_envs: i
     states = random_states(env, params, key_states, num_envs, steps, num_states)
     for tpl in reversed(hierarchy.template_list):  # deepest first: see the module's note
         tpl_key = jax.random.fold_in(key_calls, zlib.crc32(tpl.name.encode()))
-        with tolerances(rtol, atol):
+        with tolerances(*env_tolerances(env, rtol, atol)):
             out = check_template(env, params, tpl, states, tpl_key,
                                  f"{env_name} template {tpl.name!r}", loop_states)
         states = _mix_in_outcomes(states, out, jax.random.fold_in(tpl_key, 1))
