@@ -110,3 +110,18 @@ def test_an_unknown_user_module_is_a_clear_error(capsys):
     assert "cannot import 'no_such_module_here'" in capsys.readouterr().err
     assert main(["bench", "mine/open_chest"]) == 2
     assert "MODULE:ENV/TASK" in capsys.readouterr().err
+
+
+def test_the_version_comes_from_package_metadata(monkeypatch):
+    import importlib.metadata
+
+    import smjax
+    from smjax.core.version import smjax_version
+
+    assert smjax.__version__ == importlib.metadata.version("smjax")
+
+    def missing(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr("smjax.core.version.version", missing)
+    assert smjax_version() == "0+unknown"  # a bare source tree still writes results
