@@ -178,14 +178,18 @@ def _cmd_plot(args) -> int:
 
 
 def _add_render(sub):
-    p = sub.add_parser("render", help="write a GIF of an episode")
-    p.add_argument("task")
+    p = sub.add_parser("render", help="write a GIF of an episode",
+                       description="Write a GIF of one episode of ENV/TASK: random actions, or "
+                                   "with --policy the hierarchy a run trained, executing its own "
+                                   "learned options (no teleports).")
+    p.add_argument("task", help="the task, as trained (e.g. craft/get_gem)")
     p.add_argument("--policy", default=None, metavar="DIR",
                    help="a run directory: play its trained hierarchy (no teleports); default: random actions")
-    p.add_argument("--out", default="episode.gif")
-    p.add_argument("--steps", type=int, default=200, help="most steps to render")
+    p.add_argument("--out", default="episode.gif", help="the GIF to write (default episode.gif)")
+    p.add_argument("--steps", type=int, default=200,
+                   help="most environment steps to render (default 200; the episode may end sooner)")
     p.add_argument("--seed-index", type=int, default=0, help="which of the run's seeds to play")
-    p.add_argument("--fps", type=float, default=8)
+    p.add_argument("--fps", type=float, default=8, help="frames per second of the GIF (default 8)")
     p.add_argument("--env", action="append", metavar="KEY=VALUE", help="environment override (random play)")
     p.add_argument("--partial", action="store_true",
                    help="with --policy: also play a run stopped before its last level")

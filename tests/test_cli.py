@@ -41,6 +41,7 @@ def test_bench_prints_one_json_line():
     (["train", "craft/get_diamond", "--quiet"], "unknown task 'craft/get_diamond'"),
     (["train", "craft/get_wood", "--set", "num_envs=0", "--quiet"], "'num_envs' = 0"),
     (["train", "craft/get_wood", "--set", "bogus=1", "--quiet"], "unknown config field"),
+    (["train", "craft/get_wood", "--set", "num_env=3", "--quiet"], "Did you mean 'num_envs'?"),
     (["train", "craft/get_wood", "--env", "colour=red", "--quiet"], "unknown override"),
     (["bench", "nope/nothing"], "unknown task"),
     (["render", "craft/get_wood", "--policy", "/nonexistent/run"], "holds no checkpoint"),
@@ -125,3 +126,12 @@ def test_the_version_comes_from_package_metadata(monkeypatch):
 
     monkeypatch.setattr("smjax.core.version.version", missing)
     assert smjax_version() == "0+unknown"  # a bare source tree still writes results
+
+
+def test_render_help_describes_its_options(capsys):
+    with pytest.raises(SystemExit):
+        main(["render", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "Write a GIF of one episode" in out
+    for text in ("the GIF to write", "most environment steps", "frames per second"):
+        assert text in out
