@@ -179,7 +179,10 @@ def cmd_train(args) -> int:
     from smjax.train.distributed import is_writer
     from smjax.train.run import run
 
+    from smjax.core.registry import get_entry
+
     initialize_distributed(args)  # before anything touches JAX
+    get_entry(args.task)  # an unknown task is refused before --out is created
     saved = _saved_run(args)
     cfg = build_config(args, saved)
     env_over = dict(saved["env_overrides"]) if saved else {}

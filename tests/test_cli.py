@@ -128,6 +128,13 @@ def test_the_version_comes_from_package_metadata(monkeypatch):
     assert smjax_version() == "0+unknown"  # a bare source tree still writes results
 
 
+def test_an_unknown_task_leaves_no_out_directory(tmp_path, capsys):
+    out = tmp_path / "x2"
+    assert main(["train", "craft/get_woodd", "--out", str(out), "--quiet"]) == 2
+    assert "Did you mean 'craft/get_wood'" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_render_help_describes_its_options(capsys):
     with pytest.raises(SystemExit):
         main(["render", "--help"])
