@@ -12,5 +12,8 @@ if _os.environ.get("SMJAX_XLA_WORKAROUND", "1") != "0" and \
 
 from smjax.core.registry import make, registry  # noqa: E402
 
-__version__ = "0.1.0"
+
+from smjax.core.version import smjax_version  # noqa: E402
+
+__version__ = smjax_version()  # the installed distribution's; "0+unknown" in a bare source tree
 __all__ = ["make", "registry", "__version__"]

@@ -20,6 +20,9 @@ Commands:
           results.json, curves.csv and curves.png to --out
   bench   environment steps per second (one JSON line)
   list    the registered tasks (ENV/TASK) and, with --hierarchies, their hierarchies
+
+Your own environment: a module that calls smjax.core.register("ENV/TASK", factory) when
+imported; name the task MODULE:ENV/TASK, or pass --import MODULE to any command.
   plot    overlay learning curves of several runs
   render  write a GIF of an episode (random policy, or a trained hierarchy with --policy)
 
@@ -27,6 +30,7 @@ Examples:
   smjax train craft/get_wood --seeds 2 --out runs/wood
   smjax train craft/get_gem --method top-down --algo ppo --seeds 10 --out runs/gem
   smjax bench craft/get_gem --num-envs 4096 --steps 200
+  smjax train mypkg.envs:keydoor/find_treasure --out runs/treasure
 
 Several hosts (run the same command on each, changing --process-id):
   smjax train craft/get_gem --seeds 16 --out runs/gem --coordinator 10.0.0.1:1234 \
@@ -37,6 +41,17 @@ Several hosts (run the same command on each, changing --process-id):
 def _add_debug(p) -> None:
     p.add_argument("--debug", action="store_true",
                    help="show the full traceback of an error instead of one line")
+    p.add_argument("--import", dest="imports", action="append", metavar="MODULE", default=[],
+                   help="import MODULE first: a module of yours that registers tasks with "
+                        "smjax.core.register (searched in the installed packages, then the "
+                        "working directory); or name the task MODULE:ENV/TASK")
+
+
+def _import_user_modules(args) -> None:
+    from smjax.core.registry import import_env_module
+
+    for module in getattr(args, "imports", None) or []:
+        import_env_module(module)
 
 
 def _add_train(sub):
@@ -47,7 +62,8 @@ def _add_train(sub):
                                    "Every TrainConfig field can be set with --set FIELD=VALUE or a "
                                    "--config YAML/JSON file; learner hyper-parameters with "
                                    "--agent KEY=VALUE.")
-    p.add_argument("task", help="registered task, e.g. craft/get_gem (see `smjax list`)")
+    p.add_argument("task", help="registered task, e.g. craft/get_gem (see `smjax list`), or "
+                                "your own as MODULE:ENV/TASK, e.g. mypkg.envs:keydoor/find_treasure")
     p.add_argument("--method", choices=METHODS, default=None, help="default: top-down")
     p.add_argument("--algo", choices=ALGOS, default=None, help="learner for every level (default: ppo)")
     p.add_argument("--seeds", type=int, default=None, help="number of seeds (0..N-1, shifted by --seed-offset; default 1)")
@@ -175,14 +191,18 @@ def _cmd_plot(args) -> int:
 
 
 def _add_render(sub):
-    p = sub.add_parser("render", help="write a GIF of an episode")
-    p.add_argument("task")
+    p = sub.add_parser("render", help="write a GIF of an episode",
+                       description="Write a GIF of one episode of ENV/TASK: random actions, or "
+                                   "with --policy the hierarchy a run trained, executing its own "
+                                   "learned options (no teleports).")
+    p.add_argument("task", help="the task, as trained (e.g. craft/get_gem)")
     p.add_argument("--policy", default=None, metavar="DIR",
                    help="a run directory: play its trained hierarchy (no teleports); default: random actions")
-    p.add_argument("--out", default="episode.gif")
-    p.add_argument("--steps", type=int, default=200, help="most steps to render")
+    p.add_argument("--out", default="episode.gif", help="the GIF to write (default episode.gif)")
+    p.add_argument("--steps", type=int, default=200,
+                   help="most environment steps to render (default 200; the episode may end sooner)")
     p.add_argument("--seed-index", type=int, default=0, help="which of the run's seeds to play")
-    p.add_argument("--fps", type=float, default=8)
+    p.add_argument("--fps", type=float, default=8, help="frames per second of the GIF (default 8)")
     p.add_argument("--env", action="append", metavar="KEY=VALUE", help="environment override (random play)")
     p.add_argument("--partial", action="store_true",
                    help="with --policy: also play a run stopped before its last level")
@@ -227,6 +247,7 @@ def _check_image_path(out: str) -> None:
 def _run_command(command, args) -> int:
     """Run a command; a user's mistake is one line on stderr and exit code 2."""
     try:
+        _import_user_modules(args)
         return command(args)
     except KeyboardInterrupt:
         out = getattr(args, "_out", None)

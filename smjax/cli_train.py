@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import errno
 import json
+import re
 import socket
 import sys
 import time
@@ -194,11 +195,13 @@ def cmd_train(args) -> int:
     with TIMELINE.span("imports of training"):
         from smjax.train.distributed import is_writer
         from smjax.train.run import run
+    from smjax.core.registry import get_entry
 
     for flag, value in (("--out", args.out), ("--resume", args.resume)):
         if value is not None and not value.strip():  # else the default directory is used
             raise UsageError(f"{flag} is empty (an unset shell variable?); name a directory")
     initialize_distributed(args)  # before anything touches JAX
+    get_entry(args.task)  # an unknown task is refused before --out is created
     saved = _saved_run(args)
     cfg = build_config(args, saved)
     env_over = dict(saved["env_overrides"]) if saved else {}
@@ -207,7 +210,8 @@ def cmd_train(args) -> int:
         env_over["fixed_map"] = True
     seeds = choose_seeds(args, saved)
     sweep = choose_sweep(args, saved)
-    out = args.resume or args.out or f"runs/{args.task.replace('/', '_')}_{cfg.method}"
+    safe_task = re.sub(r"[^\w.-]", "_", args.task)  # MODULE:ENV/TASK holds ':' and '/'
+    out = args.resume or args.out or f"runs/{safe_task}_{cfg.method}"
     slots = len(seeds) * _num_points(sweep)
     args._batch = f"{slots} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
     args._out = out  # for the resume command an interruption prints

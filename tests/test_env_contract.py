@@ -127,10 +127,20 @@ def test_craft_worlds(task, hierarchy):
 def test_fetch_stack3():
     env, params = smjax.make("fetch/stack3", max_steps=4)
     # Rendering needs an OpenGL backend; test_fetch_render_brax.py checks it where one exists.
-    # MJX's solver leaves ~1e-6 residuals on accelerations at rest: a looser atol.
-    check_env(env, params, num_envs=2, steps=8, render=False, atol=1e-4)
-    check_hierarchy(env, params, "paper", num_envs=2, steps=8, num_states=8, loop_states=2,
-                    atol=1e-4)
+    # The tolerances are Fetch's own (contract_tolerances: MJX solver residuals).
+    check_env(env, params, num_envs=2, steps=8, render=False)
+    check_hierarchy(env, params, "paper", num_envs=2, steps=8, num_states=8, loop_states=2)
+
+
+def test_an_environment_declares_its_tolerances():
+    class Jittery(BatchSensitiveCorridor):  # rewards differ by 1 between vmap and loop
+        contract_tolerances = (0.0, 1.5)
+
+    env = Jittery()
+    check_env(env, env.default_params, **SMALL)
+    with pytest.raises(AssertionError, match="vmap == loop"):  # a given atol still wins
+        check_env(env, env.default_params, atol=1e-6, **SMALL)
+    assert smjax.make("fetch/stack1")[0].contract_tolerances[1] >= 1e-4
 
 
 @pytest.mark.slow
@@ -187,12 +197,32 @@ class WrongDoorKeyDoor(KeyDoor):
                                            initiation=good.initiation, teleport=to_door)}
 
 
+class WrongOpenKeyDoor(KeyDoor):
+    """open_door, initiable only with the key, teleports beside the door and does nothing."""
+
+    def templates(self):
+        def beside_door(key, state, params):
+            return state.replace(pos=jnp.maximum(state.door_pos - 1, 0)), jnp.asarray(0)
+
+        return super().templates() | {"open_door": OptionTemplate(
+            name="open_door", satisfied=lambda s, p: s.opened, k_max=12,
+            initiation=lambda s, p: s.has_key & ~s.opened, teleport=beside_door)}
+
+
 class WildControllerKeyDoor(KeyDoor):
     """A controller that returns action 7 of Discrete(3)."""
 
     def templates(self):
         return {"walk": OptionTemplate(name="walk", satisfied=lambda s, p: s.opened, k_max=5,
                                        controller=lambda k, s, p: jnp.asarray(7))}
+
+
+class NanRewardCorridor(Corridor):
+    """Rewards NaN on every step."""
+
+    def step_env(self, key, state, action, params):
+        obs, state, reward, term, trunc, info = super().step_env(key, state, action, params)
+        return obs, state, reward + jnp.nan, term, trunc, info
 
 
 class GridPastTheEndCorridor(Corridor):
@@ -216,8 +246,9 @@ class BlankTextCorridor(Corridor):
     (BatchSensitiveCorridor(), r"vmap == loop failed for tests/corridor: step 0, env 0: "
                                r"leaf \[2\]"),  # the reward
     (NoResetCorridor(), "auto-reset failed for tests/corridor"),
+    (NanRewardCorridor(), "reward finite failed for tests/corridor: reward at step 0, env 0 is nan"),
 ], ids=["obs-outside-space", "blank-describe", "grid-past-the-end", "vmap-differs",
-        "no-auto-reset"])
+        "no-auto-reset", "nan-reward"])
 def test_broken_env_is_named(env, match):
     with pytest.raises(AssertionError, match=match):
         check_env(env, env.default_params, **SMALL)
@@ -241,6 +272,25 @@ def test_broken_teleport_and_controller_are_named():
     with pytest.raises(AssertionError, match="controller action failed for test/keydoor "
                                              "template 'walk'"):
         check_hierarchy(env, env.default_params, hierarchy, **SMALL)
+
+
+def test_a_teleport_behind_another_is_checked_on_its_outcomes():
+    # random play seldom picks up the key: the broken open_door is reached through
+    # give_key's teleport (8 states of 4 envs x 2 steps: none holds the key)
+    env = WrongOpenKeyDoor()
+    hierarchy = declare(env, "task", {"task": ["open_door", "primitives"],
+                                      "open_door": ["give_key", "primitives"]})
+    with pytest.raises(AssertionError, match="teleport outcome failed for test/keydoor "
+                                             "template 'open_door': state"):
+        check_hierarchy(env, env.default_params, hierarchy, num_envs=4, steps=2, num_states=8)
+
+
+def test_a_teleport_initiable_nowhere_is_not_passed():
+    env = WrongOpenKeyDoor()
+    hierarchy = declare(env, "task", {"task": ["open_door", "primitives"]})  # no give_key
+    with pytest.raises(AssertionError, match="teleport outcome failed for test/keydoor template "
+                                             "'open_door': not checked: .* in 0 of 8 states"):
+        check_hierarchy(env, env.default_params, hierarchy, num_envs=4, steps=2, num_states=8)
 
 
 def test_comparisons_use_tolerances_for_floats_only():

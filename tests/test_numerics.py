@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import pytest
 
 import smjax.agents as agents
-from hier_env import make_keydoor
+from hier_env import KeyDoor, make_keydoor
 from smjax.train import TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.loop import NonFiniteError
@@ -39,3 +39,19 @@ def test_nan_injection_stops_cleanly_and_keeps_last_good_checkpoint(tmp_path, mo
     step_dir = out / "checkpoints" / info["path"]
     assert step_dir.exists()
 
+
+
+class NanRewardKeyDoor(KeyDoor):
+    """Every step pays NaN: the learner's parameters go non-finite."""
+
+    def step_env(self, key, state, action, params):
+        obs, state, reward, term, trunc, info = super().step_env(key, state, action, params)
+        return obs, state, reward + jnp.nan, term, trunc, info
+
+
+def test_a_nan_reward_is_named_as_the_cause():
+    env = NanRewardKeyDoor()
+    cfg = TrainConfig(**(CFG | {"method": "flat"}))
+    with pytest.raises(NonFiniteError, match="returns non-finite rewards .*fix the reward") as err:
+        run((env, env.default_params), cfg, [0], None, progress=False)
+    assert "learning rate" not in str(err.value)

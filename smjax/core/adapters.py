@@ -29,6 +29,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from smjax.core import spaces
 from smjax.core.env import Environment, StepResult
@@ -143,3 +144,47 @@ def from_gymnax(gymnax_env: Any, gymnax_params: Any | None = None) -> tuple[Gymn
         gymnax_params = gymnax_env.default_params
         env._params = gymnax_params
     return env, gymnax_params
+
+
+# ---- the other direction: smjax environments for gymnax-API trainers (rejax, PureJaxRL) ---
+@struct.dataclass
+class GymnaxParams:
+    """An environment's params as gymnax trainers read them: rejax evaluates for
+    ``env_params.max_steps_in_episode`` steps. Other fields are the environment's."""
+
+    env_params: Any
+    max_steps_in_episode: int = struct.field(pytree_node=False, default=1000)
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__") or name == "env_params":  # copy/pickle probe dunders
+            raise AttributeError(name)
+        return getattr(self.env_params, name)
+
+
+def gymnax_params(params: Any, max_steps_in_episode: int | None = None) -> GymnaxParams:
+    """``params`` for a gymnax trainer; the episode cap defaults to ``params.max_steps``."""
+    if isinstance(params, GymnaxParams):
+        return params
+    limit = max_steps_in_episode if max_steps_in_episode is not None else \
+        getattr(params, "max_steps", None)
+    if limit is None:
+        raise ValueError("these params have no max_steps: pass max_steps_in_episode")
+    return GymnaxParams(params, int(limit))
+
+
+def unwrap_params(params: Any) -> Any:
+    return params.env_params if isinstance(params, GymnaxParams) else params
+
+
+def to_gymnax_space(space: spaces.Space) -> Any:
+    """A smjax space as gymnax's own class where gymnax is installed (trainers such as rejax
+    choose a categorical or Gaussian policy by ``isinstance`` on it), else unchanged."""
+    if not _has_gymnax():
+        return space
+    from gymnax.environments import spaces as gspaces
+
+    if isinstance(space, spaces.Discrete) and space.shape == ():
+        return gspaces.Discrete(space.n)
+    if isinstance(space, spaces.Box):
+        return gspaces.Box(space.low, space.high, space.shape, space.dtype)
+    raise ValueError(f"no gymnax equivalent of {space!r} (Discrete with shape () and Box)")

@@ -64,6 +64,10 @@ class Environment(Generic[TEnvState, TEnvParams]):
     #: ``initial_state``/``reset_env`` ignore their key (every episode starts from the same
     #: state): ``step`` then passes its key to ``step_env`` unsplit (see the module docstring).
     reset_ignores_key: bool = False
+    #: ``(rtol, atol)`` within which floats of two programs computing the same step (jit vs
+    #: eager, vmap vs loop) agree; None: ``smjax.testing``'s defaults. A physics solver's
+    #: residuals on quantities near zero (MJX accelerations at rest) need a larger atol.
+    contract_tolerances: tuple[float, float] | None = None
 
     # ---- to implement -------------------------------------------------
     @property

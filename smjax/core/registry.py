@@ -3,12 +3,19 @@
 Environment packages register their tasks when imported; the registry imports them
 lazily on first use so that ``import smjax`` stays cheap (MuJoCo is only loaded when a
 ``fetch/...`` task is made).
+
+A user's own tasks live in a module that calls ``register`` when imported. Naming the
+task ``MODULE:ENV/TASK`` (``mypkg.envs:keydoor/find_treasure``) imports MODULE first, so
+the name alone is enough wherever smjax makes a task again (the CLI, ``--resume``,
+``smjax render --policy``).
 """
 from __future__ import annotations
 
 import difflib
 import importlib
 import inspect
+import os
+import sys
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -40,8 +47,8 @@ def register(name: str, factory: Callable[..., tuple[Any, Any]], description: st
 
     Overrides a task accepts are the factory's keyword-only parameters.
     """
-    if name.count("/") != 1 or not all(name.split("/")):
-        raise ValueError(f"task names look like 'ENV/TASK', got {name!r}")
+    if name.count("/") != 1 or not all(name.split("/")) or ":" in name:
+        raise ValueError(f"task names look like 'ENV/TASK' (no ':'), got {name!r}")
     _REGISTRY[name] = RegistryEntry(name, factory, description)
 
 
@@ -57,6 +64,35 @@ def _load(env_prefix: str | None = None) -> None:
             _LOAD_ERRORS[short] = f"{type(err).__name__}: {err}"
 
 
+def import_env_module(module: str) -> None:
+    """Import a user's module whose import registers tasks (``register(...)``).
+
+    The working directory is searched last, as ``python -m`` would (the ``smjax`` console
+    script's path holds only its own folder), so installed packages are never shadowed.
+    """
+    if not module or not all(part.isidentifier() for part in module.split(".")):
+        raise ValueError(f"{module!r} is not a module name (e.g. mypkg.envs)")
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:
+        sys.path.append(cwd)
+    try:
+        importlib.import_module(module)
+    except ModuleNotFoundError as err:
+        if err.name is None or not module.startswith(err.name):
+            raise  # the module was found; something it imports is missing
+        # a user's mistake in a name (ValueError), not a missing dependency of smjax
+        raise ValueError(f"cannot import {module!r} (looked in the installed packages and "
+                         f"{cwd}): {err}") from None
+
+
+def split_task(name: str) -> tuple[str | None, str]:
+    """``MODULE:ENV/TASK`` -> (MODULE, ENV/TASK); a plain ``ENV/TASK`` -> (None, ENV/TASK)."""
+    if isinstance(name, str) and ":" in name:
+        module, task = name.split(":", 1)
+        return module, task
+    return None, name
+
+
 def registry() -> dict[str, str]:
     """All registered task names -> one-line descriptions."""
     _load()
@@ -64,10 +100,14 @@ def registry() -> dict[str, str]:
 
 
 def get_entry(name: str) -> RegistryEntry:
+    module, name = split_task(name)
+    if module is not None:
+        import_env_module(module)
     if not isinstance(name, str) or "/" not in name:
         _load()
         raise ValueError(
-            f"task names look like 'ENV/TASK' (e.g. 'craft/get_gem'), got {name!r}. "
+            f"task names look like 'ENV/TASK' or 'MODULE:ENV/TASK' (e.g. 'craft/get_gem', "
+            f"'mypkg.envs:keydoor/find_treasure'), got {name!r}. "
             f"Valid names: {', '.join(sorted(_REGISTRY))}"
         )
     _load(name.split("/", 1)[0])
@@ -79,9 +119,10 @@ def get_entry(name: str) -> RegistryEntry:
             hint = f" (environment package '{prefix}' failed to import: {_LOAD_ERRORS[prefix]})"
         close = difflib.get_close_matches(name, list(_REGISTRY), n=3)
         maybe = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
-        raise KeyError(
-            f"unknown task {name!r}{hint}.{maybe} Valid names: {', '.join(sorted(_REGISTRY))}"
-        )
+        mine = "" if module else (" Your own task: name it MODULE:ENV/TASK, or pass --import "
+                                  "MODULE, where MODULE calls smjax.core.register.")
+        raise KeyError(f"unknown task {name!r}{hint}.{maybe} Valid names: "
+                       f"{', '.join(sorted(_REGISTRY))}.{mine}")
     return _REGISTRY[name]
 
 

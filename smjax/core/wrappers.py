@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from smjax.core.adapters import gymnax_params, to_gymnax_space, unwrap_params
 from smjax.core.env import Environment
 
 
@@ -17,6 +18,10 @@ class EnvWrapper:
         self._env = env
 
     def __getattr__(self, name: str) -> Any:
+        # copy/pickle build the object without __init__ and probe it before _env exists:
+        # looking _env up through __getattr__ again would recurse forever
+        if name == "_env" or name.startswith("__"):
+            raise AttributeError(name)
         return getattr(self._env, name)
 
 
@@ -67,10 +72,41 @@ class EpisodeStatistics(EnvWrapper):
 
 
 class LegacyGymnaxStep(EnvWrapper):
-    """Adapter to the pre-1.0 gymnax API: ``step`` returns (obs, state, reward, done, info)."""
+    """An smjax environment for trainers of the pre-1.0 gymnax API (rejax, PureJaxRL)::
+
+        env = LegacyGymnaxStep(*smjax.make("craft/get_wood", max_steps=50))
+        algo = rejax.PPO.create(env=env, env_params=env.default_params, ...)
+
+    ``step`` returns (obs, state, reward, done, info) with ``info["truncated"]``; spaces are
+    gymnax's classes when gymnax is installed; ``default_params`` (the params given, else
+    the environment's, as ``gymnax_params``) carries ``max_steps_in_episode``, and the
+    environment's own params are accepted too.
+    """
+
+    def __init__(self, env: Environment, params=None):
+        super().__init__(env)
+        self._params = env.default_params if params is None else unwrap_params(params)
+
+    @property
+    def default_params(self):
+        return gymnax_params(self._params)
+
+    def reset(self, key, params=None):
+        return self._env.reset(key, unwrap_params(params))
 
     def step(self, key, state, action, params=None):
-        obs, state, reward, terminated, truncated, info = self._env.step(key, state, action, params)
+        obs, state, reward, terminated, truncated, info = self._env.step(
+            key, state, action, unwrap_params(params))
         info = dict(info)
         info["truncated"] = truncated
         return obs, state, reward, jnp.logical_or(terminated, truncated), info
+
+    def action_space(self, params=None):
+        return to_gymnax_space(self._env.action_space(unwrap_params(params)))
+
+    def observation_space(self, params=None):
+        return to_gymnax_space(self._env.observation_space(unwrap_params(params)))
+
+    @property
+    def num_actions(self) -> int:
+        return self._env.action_space(self._env.default_params).n

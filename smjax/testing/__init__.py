@@ -11,6 +11,7 @@ with the property's name and names the environment):
 * ``determinism``: the same key gives the same rollout, bit for bit;
 * ``observation finite`` / ``observation in space``: every observation (reset, step and
   ``info["final_observation"]``) is finite and inside ``observation_space(params)``;
+* ``reward finite``: every reward of the rollout is finite (no NaN or inf);
 * ``vmap == loop``: vmapped ``reset``/``step`` equal the single environment's, env by env;
 * ``auto-reset``: when an episode ends, ``step`` returns the observation and state that
   ``reset_env`` gives for the second half of ``jax.random.split(key)`` (what
@@ -21,14 +22,16 @@ with the property's name and names the environment):
 * ``describe``: ``describe`` returns a non-empty str, or None (no text form).
 
 ``check_hierarchy(env, params, hierarchy)`` checks every template of a hierarchy on
-states reached by random play: ``template output`` (predicates are bool scalars),
+states reached by random play and by the hierarchy's own teleports: ``template output`` (predicates are bool scalars),
 ``vmap == loop`` (initiation, satisfied, failed, teleport and controller agree jitted and
 vmapped vs one state at a time), ``teleport outcome`` (where initiable, the teleport's
-outcome satisfies the template), ``teleport action``/``controller action`` (inside the
+outcome satisfies the template; a teleport initiable in none of the states fails, as
+unchecked), ``teleport action``/``controller action`` (inside the
 action space).
 
 Floats computed by two different programs (jit vs eager, vmap vs loop) are compared with
-``RTOL``/``ATOL`` (or the ``rtol``/``atol`` a check is given): XLA fuses them differently,
+``RTOL``/``ATOL`` (or the ``rtol``/``atol`` a check is given, else the environment's
+``contract_tolerances``): XLA fuses them differently,
 which changes float32 rounding; integer and bool leaves must be equal.
 """
 from smjax.testing.compare import ATOL, RTOL, assert_trees_close, tolerances, trees_mismatch

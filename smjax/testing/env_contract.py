@@ -77,6 +77,12 @@ def _make_one_env(env) -> Callable:
     return jax.jit(one)
 
 
+def env_tolerances(env, rtol: float | None, atol: float | None) -> tuple[float, float]:
+    """The tolerances given, else those the environment declares, else the defaults."""
+    declared = getattr(env, "contract_tolerances", None) or (RTOL, ATOL)
+    return (declared[0] if rtol is None else rtol, declared[1] if atol is None else atol)
+
+
 def short_params(params: Any, steps: int) -> Any | None:
     """params with ``max_steps`` cut to ``steps // 4`` so episodes end in a rollout."""
     if not hasattr(params, "max_steps") or not hasattr(params, "replace"):
@@ -156,6 +162,16 @@ def check_observations(reset_obs, traj, obs_space: spaces.Space, who: str) -> No
                  f"outside {obs_space!r} (min {bad.min()}, max {bad.max()})")
 
 
+def check_rewards(traj, who: str) -> None:
+    """Every reward of the rollout is finite: a NaN would reach the learner's update."""
+    reward = np.asarray(traj[3][2])
+    finite = np.isfinite(reward)
+    if not finite.all():
+        t, i = np.argwhere(~finite)[0]
+        fail("reward finite", who, f"reward at step {t}, env {i} is {reward[t, i]} "
+             f"({int((~finite).sum())} of {finite.size} rewards are non-finite)")
+
+
 def check_vmap_loop(params, key_roll, rollout_out, one, times, who: str) -> None:
     """The batched rollout, env by env, equals single-environment reset and steps."""
     (reset_obs, reset_state), (states, actions, keys, out) = rollout_out
@@ -225,17 +241,18 @@ def _any_done(traj) -> bool:
 
 
 def check_env(env, params: Any = None, *, num_envs: int = 8, steps: int = 64,
-              key: jax.Array | None = None, render: bool = True, rtol: float = RTOL,
-              atol: float = ATOL) -> None:
+              key: jax.Array | None = None, render: bool = True, rtol: float | None = None,
+              atol: float | None = None) -> None:
     """Check that ``env`` meets the smjax environment contract (see ``smjax.testing``).
 
     Plays ``num_envs`` environments for ``steps`` random steps. If no episode ends and
     ``params`` has a ``max_steps`` field, the auto-reset check plays again with
     ``max_steps = steps // 4``; other environments need params (or ``steps``) under which
     episodes end. ``rtol``/``atol`` bound float differences between two programs (jit vs
-    eager, vmap vs loop). Raises ``AssertionError`` whose message starts with the property.
+    eager, vmap vs loop); None: the environment's ``contract_tolerances``, else ``RTOL``/
+    ``ATOL``. Raises ``AssertionError`` whose message starts with the property.
     """
-    with tolerances(rtol, atol):
+    with tolerances(*env_tolerances(env, rtol, atol)):
         _check_env(env, params, num_envs, steps, key, render)
 
 
@@ -255,6 +272,7 @@ def _check_env(env, params, num_envs: int, steps: int, key, render: bool) -> Non
     assert_trees_close(rollout(key_roll, params), first, prop="determinism", who=who,
                        exact=True, where="two rollouts with the same key")
     check_observations(reset_obs, traj, obs_space, who)
+    check_rewards(traj, who)
     check_vmap_loop(params, key_roll, first, one, _spread(steps), who)
     if not _any_done(traj):
         short = short_params(params, steps)
@@ -266,6 +284,7 @@ def _check_env(env, params, num_envs: int, steps: int, key, render: bool) -> Non
             fail("auto-reset", who, f"no episode ended in {steps} steps, even with "
                  f"max_steps={max(1, steps // 4)}")
         check_observations(reset_obs, traj, obs_space, who)
+        check_rewards(traj, who)
         params = short
     check_auto_reset(env, params, traj, one, who)
     if render:

@@ -4,6 +4,12 @@ Each template is evaluated by one function of (key, state) returning everything 
 defines (initiation, satisfied, failed, the teleport's jump, action and outcome, the
 controller's action); that one function is compiled twice, vmapped and single, so a
 hierarchy costs two compiles per template.
+
+Random play rarely reaches the states where higher templates are initiable (a door
+needs its key), so templates are checked deepest first and each teleport's outcomes
+replace about half of the states where it ran: a parent is then checked on the states
+its children's teleports lead to. A teleport still initiable in none of the states
+fails the check (``teleport outcome``), since nothing would have checked it.
 """
 from __future__ import annotations
 
@@ -17,9 +23,9 @@ import numpy as np
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.template import OptionTemplate
 from smjax.testing.compare import (
-    ATOL, RTOL, all_equal, assert_trees_close, fail, index, tolerances,
+    all_equal, assert_trees_close, fail, index, tolerances,
 )
-from smjax.testing.env_contract import make_rollout
+from smjax.testing.env_contract import env_tolerances, make_rollout
 
 PREDICATES = ("initiation", "satisfied", "failed")
 
@@ -51,6 +57,7 @@ def _template_fn(env, tpl: OptionTemplate, params) -> Callable:
             # A teleport that leaves the state unchanged declares itself impossible here
             # (Craft: nothing of the target kind has an empty neighbour).
             out["teleport_moved"] = ~all_equal(jumped, state)
+            out["teleport_outcome"] = outcome
         if tpl.controller is not None:
             out["controller_action"] = jnp.asarray(tpl.controller(key_tp, state, params))
         return out
@@ -89,6 +96,12 @@ def _check_teleport_outcome(out: dict, who: str) -> None:
     if "teleport_reached" not in out:
         return
     initiable = np.asarray(out["initiation"])
+    ran = initiable & np.asarray(out["teleport_moved"])
+    if not ran.any():
+        fail("teleport outcome", who, f"not checked: the template is initiable (with a teleport "
+             f"that moves the state) in 0 of {len(initiable)} states, from random play and the "
+             f"hierarchy's other teleports; raise num_states/steps, or pass params or a key "
+             f"under which it is initiable")
     bad = np.argwhere(initiable & np.asarray(out["teleport_moved"] & ~out["teleport_reached"]))
     if bad.size:
         fail("teleport outcome", who, f"state {int(bad[0, 0])} ({len(bad)} of {len(initiable)} "
@@ -97,8 +110,9 @@ def _check_teleport_outcome(out: dict, who: str) -> None:
 
 
 def check_template(env, params, tpl: OptionTemplate, states, key, who: str,
-                   loop_states: int = 4) -> None:
-    """One template on a batch of states: jit+vmap == loop, outputs, actions, outcomes."""
+                   loop_states: int = 4) -> dict:
+    """One template on a batch of states: jit+vmap == loop, outputs, actions, outcomes.
+    Returns everything it computed per state (``_template_fn``'s dict, batched)."""
     count = jax.tree.leaves(states)[0].shape[0]
     keys = jax.random.split(key, count)
     evaluate = _template_fn(env, tpl, params)
@@ -111,19 +125,34 @@ def check_template(env, params, tpl: OptionTemplate, states, key, who: str,
                            who=who, where=f"state {i}")
     _check_actions(out, act_space, who)
     _check_teleport_outcome(out, who)
+    return out
+
+
+def _mix_in_outcomes(states, out: dict, key) -> Any:
+    """``states`` with about half of those where the teleport ran replaced by its outcome."""
+    if "teleport_outcome" not in out:
+        return states
+    ran = out["initiation"] & out["teleport_moved"]
+    take = ran & jax.random.bernoulli(key, 0.5, ran.shape)
+
+    def pick(old, new):
+        return jnp.where(take.reshape(take.shape + (1,) * (old.ndim - 1)), new, old)
+
+    return jax.tree.map(pick, states, out["teleport_outcome"])
 
 
 def check_hierarchy(env, params: Any, hierarchy: Hierarchy | str, *, num_envs: int = 8,
                     steps: int = 16, num_states: int = 32, loop_states: int = 4,
-                    key: jax.Array | None = None, rtol: float = RTOL,
-                    atol: float = ATOL) -> None:
+                    key: jax.Array | None = None, rtol: float | None = None,
+                    atol: float | None = None) -> None:
     """Check every template of ``hierarchy`` (a Hierarchy, or a name in ``env.hierarchies()``).
 
     On ``num_states`` states spread over ``steps`` random steps of ``num_envs``
     environments: initiation/satisfied/failed return bools; everything a template computes
     agrees jitted+vmapped and per state (the first ``loop_states``); a teleport's outcome
-    satisfies the template wherever it is initiable and the teleport moved the state;
-    teleport and controller actions lie inside the action space. Raises
+    satisfies the template wherever it is initiable and the teleport moved the state, and
+    there is at least one such state (templates deepest first, each checked also on its
+    children's teleport outcomes); teleport and controller actions lie inside the action space. Raises
     ``AssertionError`` whose message starts with the property and names the template.
     ``rtol``/``atol`` as in ``check_env``.
     """
@@ -134,8 +163,9 @@ def check_hierarchy(env, params: Any, hierarchy: Hierarchy | str, *, num_envs: i
     env_name = getattr(env, "name", type(env).__name__)
     key_states, key_calls = jax.random.split(key)
     states = random_states(env, params, key_states, num_envs, steps, num_states)
-    for tpl in hierarchy.template_list:
+    for tpl in reversed(hierarchy.template_list):  # deepest first: see the module's note
         tpl_key = jax.random.fold_in(key_calls, zlib.crc32(tpl.name.encode()))
-        with tolerances(rtol, atol):
-            check_template(env, params, tpl, states, tpl_key,
-                           f"{env_name} template {tpl.name!r}", loop_states)
+        with tolerances(*env_tolerances(env, rtol, atol)):
+            out = check_template(env, params, tpl, states, tpl_key,
+                                 f"{env_name} template {tpl.name!r}", loop_states)
+        states = _mix_in_outcomes(states, out, jax.random.fold_in(tpl_key, 1))

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import json
 import math
 from dataclasses import dataclass, field
@@ -344,7 +345,11 @@ class TrainConfig:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names, key=repr)  # key=repr: keys may be of any type
         if unknown:
-            raise ConfigError(f"unknown config field(s) {short(unknown)}; valid fields: {sorted(names)}")
+            close = [m for u in unknown if isinstance(u, str)
+                     for m in difflib.get_close_matches(u, names, n=1)]
+            maybe = f" Did you mean {', '.join(repr(m) for m in close)}?" if close else ""
+            raise ConfigError(f"unknown config field(s) {short(unknown)}.{maybe} Valid fields: "
+                              f"{sorted(names)}")
         return cls(**_parsed_fields(cls, data))
 
     @classmethod

@@ -11,7 +11,7 @@ from typing import Any
 
 import jax
 
-import smjax
+from smjax.core.version import smjax_version
 
 # running_success: the mean success over the last success_window learner episodes (the
 # level's learner; in fine-tuning, whole-task episodes). Files written before it had this
@@ -112,7 +112,7 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
         "compile_seconds": raw["compile_seconds"],
         "device": jax.devices()[0].platform,
         "jax_version": jax.__version__,
-        "smjax_version": smjax.__version__,
+        "smjax_version": smjax_version(),
         "config": config,
     })
 

@@ -20,6 +20,7 @@ from smjax.train.plans import (declared_identity, plan_levels, reachable_root_th
                                resolve_hierarchy)
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
+from smjax.train.reward_probe import nonfinite_reward
 from smjax.train.results import build_results, write_results, write_sweep
 from smjax.train.sweep import normalize_sweep, point_config, point_raw, slot_layout, sweep_points
 
@@ -199,7 +200,10 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     try:
         raw = trainer.run()
     except NonFiniteError as err:
-        raise NonFiniteError(f"{err}; {_kept(out_dir)}") from None
+        cause = nonfinite_reward(env, env_params)
+        remedy = "fix the reward" if cause else "lower the learning rate"
+        why = f"{cause}; " if cause else ""
+        raise NonFiniteError(f"{err}; {why}{_kept(out_dir, remedy)}") from None
     extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides}
     if points is None:
         return _finish(env.name, cfg, seeds, raw, extra, out_dir)
@@ -227,13 +231,13 @@ def _finish(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra:
     return results_with_raw
 
 
-def _kept(out_dir) -> str:
+def _kept(out_dir, remedy: str) -> str:
     """What a user can fall back on after a non-finite update."""
     if out_dir is None:
-        return "no checkpoint (no output directory); lower the learning rate and train again"
+        return f"no checkpoint (no output directory); {remedy} and train again"
     info = ckpt.load_meta(out_dir) if dist.is_writer() else None
     if info is None:
-        return (f"no checkpoint had been written to {out_dir}; lower the learning rate and "
-                f"train again (--overwrite)")
+        return (f"no checkpoint had been written to {out_dir}; {remedy} and train again "
+                f"(--overwrite)")
     return (f"the last good checkpoint ({info['path']}, chunk {info['step']}) is kept in "
             f"{ckpt.checkpoint_dir(out_dir)}")

@@ -61,6 +61,18 @@ def _before_after(ax, meta: dict, color) -> None:
         ax.axhline(np.mean(after), color=color, ls="--", lw=1, label=f"after: {np.mean(after):.2f}")
 
 
+def run_labels(dirs: list[Path], metas: list[dict]) -> list[str]:
+    """Legend labels: "method (algo)", with the run's directory where two would coincide
+    (two seeds' or two configs' runs of one method)."""
+    labels = [f"{m.get('method', d.name)} ({m.get('algo', '?')})" for d, m in zip(dirs, metas)]
+    if len(set(labels)) == len(labels):
+        return labels
+    names = [d.name for d in dirs]
+    if len(set(names)) < len(names):  # runs/a/x and runs/b/x: the fuller path
+        names = [str(d) for d in dirs]
+    return [f"{label}: {name}" for label, name in zip(labels, names)]
+
+
 def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
     """Overlay runs (e.g. top-down vs flat): one panel per level, mean +- std over seeds.
 
@@ -78,8 +90,8 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
                     key=lambda k: (k[1] == FINETUNE, k))
     n = max(1, len(levels))
     fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.4), squeeze=False)
-    for d, rows, meta in runs:
-        label = f"{meta.get('method', d.name)} ({meta.get('algo', '?')})"
+    labels = run_labels([d for d, _, _ in runs], [meta for _, _, meta in runs])
+    for (d, rows, meta), label in zip(runs, labels):
         by_level = defaultdict(lambda: defaultdict(list))
         for r in rows:
             if r["running_success"] == "":
