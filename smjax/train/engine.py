@@ -108,8 +108,9 @@ class Engine:
                                       reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
                                       policy_memory=cfg.policy_memory,
                                       template_temperature=cfg.option_temperature)
-        obs, _ = env.reset_env(jax.random.PRNGKey(0), env_params)
-        self.example_obs = self.runner.policy_obs(obs[None])[0]  # what the policies see
+        # what the policies see (one compiled program: run op by op, an environment's reset
+        # compiles dozens of tiny programs before training starts)
+        self.example_obs = jax.jit(self._example_obs)(jax.random.PRNGKey(0), env_params)
         self.num_actions = hierarchy.num_actions
         # every argument has a seed axis: each seed trains its own level (or fine-tunes)
         self.chunk = jax.jit(jax.vmap(self._chunk), donate_argnums=(0,))
@@ -120,8 +121,13 @@ class Engine:
             static_argnums=(11,))
         self._compiled_episodes: dict[tuple, Any] = {}
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
+        # host-side array plumbing as one program each, not one tiny program per leaf
+        self._stack = jax.jit(lambda states: jax.tree.map(lambda *xs: jnp.stack(xs), *states))
+        self._new_bank = jax.jit(self._copies_per_option)
         self._warm = jax.jit(jax.vmap(agent.warm_start))
-        self._warm_joint = jax.jit(jax.vmap(jax.vmap(agent.warm_start)))
+        self._warm_joint = jax.jit(lambda learners, bank: jax.vmap(jax.vmap(agent.warm_start))(
+            self._copies_per_option(learners), bank))
+        self._pending_per_option = jax.jit(self._copies_per_option)
         # jitted, so it also slices a bank sharded over processes
         self._bank_entry0 = jax.jit(lambda bank: jax.tree.map(lambda p: p[:, 0], bank))
         self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
@@ -143,8 +149,7 @@ class Engine:
         ``jit(vmap(init))`` of these networks for some sizes; this keeps init safe even when
         a user has opted out of that flag.
         """
-        states = [self._init_one(k) for k in keys]
-        return jax.tree.map(lambda *xs: jnp.stack(xs), *states)
+        return self._stack([self._init_one(k) for k in keys])
 
     def warm_start(self, states, params):
         """Learner states (leading axis S) that continue from trained ``params``."""
@@ -159,18 +164,23 @@ class Engine:
         (axis O), each continuing from its bank entry (``learners``: fresh states [S], e.g.
         with fine-tuning's hyper-parameters, copied once per option), fresh whole-task
         episodes from the root, and no pending decisions (one record per option)."""
-        def per_option(x):
-            return jnp.repeat(x[:, None], self.h.num_options, axis=1)
-
-        learners = self._warm_joint(jax.tree.map(per_option, learners), bank)
+        learners = self._warm_joint(learners, bank)
         carry = self.reset(reset_keys, jnp.zeros(reset_keys.shape[:1], jnp.int32))
-        return SeedState(carry.replace(pending=jax.tree.map(per_option, carry.pending)),
+        return SeedState(carry.replace(pending=self._pending_per_option(carry.pending)),
                          learners, keys)
 
     def new_bank(self, learner_states) -> Any:
         """Policy bank per seed: [S, num_options, ...] copies of the learners' initial params."""
+        return self._new_bank(learner_states.params)
+
+    def _copies_per_option(self, tree):
+        """Each leaf [S, ...] as [S, num_options, ...] copies."""
         n = self.h.num_options
-        return jax.tree.map(lambda p: jnp.repeat(p[:, None], n, axis=1), learner_states.params)
+        return jax.tree.map(lambda x: jnp.repeat(x[:, None], n, axis=1), tree)
+
+    def _example_obs(self, key: jax.Array, env_params) -> jax.Array:
+        obs, _ = self.env.reset_env(key, env_params)
+        return self.runner.policy_obs(obs[None])[0]
 
     @staticmethod
     def store_in_bank(bank, params, option: int):
