@@ -1,4 +1,4 @@
-# Fetch sample complexity on one GPU (benchmarks/RESULTS.md section 7): the (blocks, method)
+# Fetch sample complexity on one GPU (benchmarks/RESULTS.md, "Fetch"): the (blocks, method)
 # runs of fetch_sample_complexity.py, one after another (one run alone trains ~11k env
 # steps/s on an H100; two sharing the GPU get ~4k each). JOBS picks runs (default
 # "fl3 td3 fl4 td4"), EXTRA adds flags. Needs the mujoco/mjx/brax wheels in .whl (device README),

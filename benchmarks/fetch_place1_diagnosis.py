@@ -1,4 +1,4 @@
-"""Why Fetch's place_1 level does not learn (benchmarks/RESULTS.md section 7.2).
+"""Why Fetch's place_1 level does not learn (before levels were gated).
 
     JAX_PLATFORMS=cpu python benchmarks/fetch_place1_diagnosis.py      # ~15 min on 2 CPU cores
 

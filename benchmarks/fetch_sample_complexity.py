@@ -31,7 +31,7 @@ from _stats import mean_std, reached_summary  # noqa: E402
 
 # env steps to average score 1 (the paper's Figure; flat is stuck near 1/3 there)
 PAPER = {3: "4.5e5", 4: "6e5"}
-# DQN settings (benchmarks/RESULTS.md section 7 says what they gave). The root's reward is
+# DQN settings (benchmarks/RESULTS.md, "Fetch", says what they give). The root's reward is
 # -(blocks not in place) per tick, summed over options of up to 80 ticks: reward_scale keeps
 # its Q values O(10); gamma 0.96 per tick is the reference's per-decision discounts (0.2 for
 # an ~40-tick place, ~0.5 for a level-2 option) in SMDP form.
@@ -40,13 +40,13 @@ PAPER = {3: "4.5e5", 4: "6e5"}
 # whose option is still running at a rollout's end is carried into the next rollout and
 # trained once complete (smjax.agents.smdp.carry_pending). Before that fix every place
 # decision was cut at the rollout end and bootstrapped from a mid-option state, and the root
-# stayed at a random root's score (RESULTS section 7). gradient_steps_per_update scales
+# stayed at a random root's score. gradient_steps_per_update scales
 # with the rollout, 2 per tick, so a budget buys the same gradient steps at any length.
 #
 # Top-down uses the ``paper_hold`` hierarchy by default: the root's "do nothing" is only
 # initiable once every block is in place (smjax/envs/fetch/templates.py says why);
-# --hierarchy paper gives the unrestricted one-tick noop. The best measured recipe (RESULTS
-# section 24: greedy score 0.954 on 3 blocks) is --hierarchy paper_hold_all (no noop at level 2
+# --hierarchy paper gives the unrestricted one-tick noop. The best measured recipe
+# (benchmarks/RESULTS.md, "Fetch": greedy score 0.961 on 3 blocks) is --hierarchy paper_hold_all (no noop at level 2
 # either) with --num-envs 128 --max-steps 800000 --agent gradient_steps_per_update=128 and the
 # place levels gated at 0.97; configs/fetch_stack3.yaml holds it for `smjax train`.
 AGENT = {"hidden_sizes": [256, 256], "learning_rate": 5e-4,
@@ -57,13 +57,13 @@ GAMMA = 0.96
 # The root (``stack``) of top-down learns with 0.99 per tick instead: at 0.96 the horizon
 # (~25 ticks) is shorter than one place_i option (23-51 ticks), so the root hardly sees
 # past the block it is placing, and on 4 blocks half of the seeds plateaued below 0.85.
-# Root-only sweep on an H100 (RESULTS 7.5): 0.99 reached 0.85 in 20/20 seed-runs over
+# Root-only sweep on an H100 (benchmarks/RESULTS.md, "Fetch"): 0.99 reached 0.85 in 20/20 seed-runs over
 # four (target period, epsilon decay) settings, 0.96 in 10/20.
 ROOT_GAMMA = 0.99
 ROLLOUT_TICKS = 16
 # A level ends when the greedy policy that will be frozen passes the threshold too (the
 # engine's gate): before the gate, place_0 "passed" on epsilon ~0.9 exploration luck and
-# its frozen greedy policy then placed block 0 in 1 of 100 calls (RESULTS section 7.2).
+# its frozen greedy policy then placed block 0 in 1 of 100 calls (before levels were gated).
 # A gate attempt runs GATE_ENVS whole episodes per seed (one MJX batch), costlier than a
 # 16-tick chunk, so it is tried every GATE_INTERVAL chunks at most.
 GATE_ENVS = 128

@@ -1,6 +1,6 @@
 """Fine-tuning with DQN on the test key-door room: per seed, final_success before the phase,
 the fine-tuned hierarchy's check, which hierarchy the phase handed back (the better of the
-two), and the final evaluation (benchmarks/RESULTS.md section 13). Deterministic on a CPU.
+two), and the final evaluation. Deterministic on a CPU.
 
     python benchmarks/finetune_keep_better_dqn.py --gradient-steps 16
     python benchmarks/finetune_keep_better_dqn.py --finetune-agent '{"epsilon_end": 0.2}'

@@ -38,7 +38,7 @@ def test_default_rollouts_are_shorter_than_a_place_option(blocks, method):
     assert cfg.hierarchy == (None if method == "flat" else "paper_hold")
     # levels end on the frozen greedy policy, judged on whole episodes
     assert cfg.gate and cfg.gate_max_ticks >= 50 * blocks
-    # top-down's root looks further ahead than its skills (RESULTS 7.5); flat is unchanged
+    # top-down's root looks further ahead than its skills (a horizon longer than one place option); flat is unchanged
     assert cfg.gamma == FSC.GAMMA
     assert cfg.levels == ({} if method == "flat" else {"stack": {"gamma": FSC.ROOT_GAMMA}})
 
@@ -66,7 +66,7 @@ def test_ppo_gets_no_dqn_gradient_steps():
 
 
 def test_the_fetch_preset_is_the_benchmarks_recipe():
-    # configs/fetch_stack3.yaml trains what RESULTS section 24 ran through the script
+    # configs/fetch_stack3.yaml trains what the script trains
     from smjax.train.config import resolve_config
 
     levels = {"stack": {"gamma": 0.99}, "place_0": {"threshold": 0.97},

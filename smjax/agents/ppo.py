@@ -43,9 +43,7 @@ from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_g
 
 @dataclass(frozen=True)
 class PPOConfig:
-    # 5e-4, not PureJaxRL's 2.5e-4: on Craft (get_gem, get_gold, both observations; 10
-    # seeds) the levels took 25-38% fewer episodes and fine-tuning ended higher
-    # (benchmarks/RESULTS.md section 13)
+    # 5e-4, not PureJaxRL's 2.5e-4: Craft's levels need a quarter fewer episodes with it
     learning_rate: float = 5e-4
     gamma: float = 0.99
     gae_lambda: float = 0.95
@@ -53,9 +51,8 @@ class PPOConfig:
     ent_coef: float = 0.01
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
-    # 4: at 8 the hierarchy's levels take 7-32% fewer episodes on Craft, but flat PPO on
-    # get_gold collapses (6 of 10 seeds end at 0.0, against 0.79 at 4), and the 2-core CPU
-    # quick start trains 1.14x longer (benchmarks/RESULTS.md section 15)
+    # 4: at 8 the hierarchy's levels are a little cheaper, but flat PPO collapses on long
+    # sparse tasks, and the flat baseline must not be broken by the defaults
     update_epochs: int = 4
     num_minibatches: int = 4
     # Early stop on the policy's drift (0: never): once a minibatch's approximate
@@ -75,7 +72,7 @@ class PPOConfig:
     # the option's decisions to its next (``networks.RecurrentActorCritic``), trained by
     # backpropagation through the rollout, minibatches then being sets of environments.
     # For observations that cannot tell places apart: a memoryless policy that picks
-    # greedily loops where it cannot see what changed (benchmarks/RESULTS.md section 17).
+    # greedily loops where it cannot see what changed.
     recurrent_size: int = 0
     normalize_advantages: bool = True
     clip_value_loss: bool = True

@@ -3,11 +3,10 @@ changed the observation.
 
 Why: on Craft a memoryless policy that picks greedily repeats itself forever where a move
 is blocked (the observation, and so the pick, stays the same), so the learned options rely
-on sampling to get out, and the same sampling picks up stray items (benchmarks/RESULTS.md
-sections 11 and 14). With the last action and a "nothing changed" bit in its input, a
-policy can tell a blocked move from a fresh state and choose otherwise without chance.
-Measured on Craft: greedy execution rises from ~0 to 0.10-0.41, sampled execution (PPO's
-final_success) does not move (RESULTS section 14); so it is an option, off by default.
+on sampling to get out, and the same sampling picks up stray items. With the last action
+and a "nothing changed" bit in its input, a policy can tell a blocked move from a fresh
+state and choose otherwise without chance. It helps greedy execution, not the sampled
+success PPO reports, so it is an option, off by default.
 
 Generic: it reads only the observation array and the primitive action the tick executed
 (whichever option chose it, or a controller or teleport), never the environment's state.

@@ -76,7 +76,7 @@ class HierarchyRunner(PolicyBank):
         self.reset_pool = reset_pool
         if frozen_eval not in FROZEN_EVALS:
             raise ValueError(f"frozen_eval must be one of {FROZEN_EVALS}, got {frozen_eval!r}")
-        if frozen_eval == "auto":  # measured: benchmarks/RESULTS.md, section 8
+        if frozen_eval == "auto":  # a loop of small applies is cheaper on a CPU, one wide one on a GPU
             frozen_eval = "learned" if jax.default_backend() == "cpu" else "all"
         self.frozen_eval = frozen_eval
         tpls = hierarchy.template_list

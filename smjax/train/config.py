@@ -29,151 +29,75 @@ class ConfigError(ValueError):
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Every knob of a training run. ``agent`` holds the learner's own hyper-parameters.
+    """Every knob of a training run (docs/guide.md, "TrainConfig reference").
 
     Attributes:
-      method: top-down (the paper's Algorithms 1-2), bottom-up (option-value iteration
-        order: sub-skills first from reset states), or flat (one learner, no hierarchy).
-      algo: learner for every level: ppo, dqn or actor-critic (the paper's).
-      hierarchy: name from ``env.hierarchies()``; None picks the environment's default
-        (the first of its catalogue). ``flat`` trains its flattening (one level over its
-        leaves: ``Hierarchy.flattened``).
+      method: top-down (the paper's Algorithms 1-2), bottom-up (sub-skills first, from
+        reset states) or flat (one learner over the hierarchy's leaves).
+      algo: the learner of every level: ppo, dqn or actor-critic (the paper's).
+      hierarchy: a name from ``env.hierarchies()``; None: the catalogue's first.
       num_envs: parallel environments per seed.
       rollout_ticks: ticks per rollout (one learner update per rollout).
       updates_per_chunk: rollouts per compiled chunk (the host checks progress between chunks).
-      threshold: a level ends when its running success reaches this (the paper: 0.8).
-      ceiling_fraction: where the root level's threshold is at or above the best task
-        success an episode can reach (``Hierarchy.success_ceiling``; Craft's make_bench:
-        0.8), the level ends at this fraction of that best instead (0.9: as far below it
-        as get_gem's 0.8 is below its 0.9); such a threshold could only be met with every
-        exploring episode perfect, and the level would spend its whole budget. The lowered
-        threshold is written into ``levels`` (the effective config shows it).
-      success_window: number of recent learner episodes the running success averages; at
-        most ``max_episodes_per_level`` (a longer window could never fill, so the threshold
-        could never be reached), per level too.
-      max_episodes_per_level: the level's budget L (environment episodes).
-      max_steps_per_level: a second budget in environment steps (0: none); a level ends at
-        whichever budget it meets first. Env-step budgets compare methods fairly when
-        episodes differ in length (football games, Fetch).
-      levels: per-template overrides, e.g. ``{"attack": {"threshold": 0.3,
-        "max_steps_per_level": 1_500_000}}``; keys are template names of the hierarchy
-        (checked when training starts) and values override ``LEVEL_FIELDS``. A level's
-        ``gamma`` is that learner's discount, in its level and in its fine-tuning turns,
-        and wins over a swept gamma.
+      threshold: the running success that ends a level (0.8: the paper's).
+      ceiling_fraction: a root threshold at or above the task's best success
+        (``Hierarchy.success_ceiling``) is lowered to this fraction of it, since only a
+        perfect exploring policy could reach it; the effective ``levels`` records it.
+      success_window: learner episodes the running success averages (at most the level's
+        episode budget, or it could never fill).
+      max_episodes_per_level: a level's budget in environment episodes.
+      max_steps_per_level: a second budget in env steps (0: none); the first met ends the
+        level. Env-step budgets compare methods fairly when episode lengths differ.
+      levels: per-template overrides of ``LEVEL_FIELDS``, e.g. ``{"attack": {"threshold":
+        0.3}}``; a level's ``gamma`` is its learner's discount, in its level and in
+        fine-tuning, and wins over a swept gamma.
       gamma: discount per primitive tick (gamma**d for a teleported call of duration d).
-      frozen_policy: how trained options act when frozen (auto: greedy for dqn, else sample).
-      option_temperature: where frozen policies sample, the temperature every template
-        below the root samples at (the root samples at 1), in the levels, gates,
-        fine-tuning and the final evaluation; below 1 a template takes its likelier
-        actions more often (fewer stray ones) while the root keeps its randomness.
-      continue_episodes: top-down/bottom-up only: do not reset the environment when the
-        option being trained ends; its next episode starts wherever the frozen levels above
-        call it again, i.e. on the states the full task gives it (football's ``attack`` is
-        otherwise only trained from kick-offs). Default: reset, as the paper does.
-      gate: a level ends only when the policy that will be frozen passes too. Once a
-        seed's running success (of the exploring behaviour policy) reaches the threshold,
-        ``gate_envs`` fresh episodes run with the learner acting as it will in the policy
-        bank (greedy for dqn), called from reset states by the trained levels above; the
-        level ends if their success reaches the threshold, else training goes on and the
-        gate is tried again ``gate_interval`` chunks later. Without it a DQN level can end
-        on exploration luck (RESULTS section 7). Gate episodes train nothing and are
-        reported per level as ``gate_env_steps``, apart from the training counts.
+      frozen_policy: how frozen options act (auto: greedy for dqn, else sample).
+      option_temperature: where frozen policies sample, the temperature of every template
+        below the root (the root samples at 1).
+      continue_episodes: do not reset when the trained option ends, so it also trains on
+        the states the full task gives it (off: reset, as the paper does).
+      gate: a level ends only when the policy that will be frozen passes on fresh episodes
+        too: the running success of an exploring policy can pass by luck.
       gate_envs: episodes of one gate attempt (one per environment).
-      gate_max_ticks: cap on a gate attempt's length (an unfinished episode fails).
+      gate_max_ticks: cap on a gate episode (an unfinished one fails).
       gate_interval: chunks between a seed's gate attempts.
-      eval_envs: episodes run (one per environment) to measure final_success.
-      eval_max_ticks: cap on an evaluation episode's length.
-      tensorboard: also write TensorBoard event files (OUT/tensorboard) of every level's
-        running success and episode count per seed.
-      reset_pool: episode starts generated ahead of each rollout, per seed; an environment
-        whose episode ends takes the next unused one (reused only when more episodes than
-        this end in one rollout). None: ``num_envs``. 0: generate a fresh start for every
-        environment in every tick and keep it where an episode ended (the exact but slow
-        way: the generation costs as much as a step in procedurally generated worlds).
-      frozen_eval: how a tick evaluates the frozen policies: "learned" (only the learned
-        options that can decide, one after another: on a CPU most of the bank is not
-        learned yet and a wide first layer is the tick's largest cost), "all" (the whole
-        bank in one batched apply: cheaper on a GPU, where launches cost more than FLOPs),
-        "auto" (learned on a CPU, all elsewhere). The results are the same either way.
-      policy_memory: what the policies see besides the observation: "none", or
-        "last_action" (the last primitive action and whether it changed the observation,
-        smjax.options.memory): a policy can then tell a blocked move from a new state
-        without sampling its way out (networks and checkpoints are shaped by it).
-      finetune: after the levels, fine-tune the learned hierarchy without teleports:
-        "on", "off", or "auto" (on for top-down, the method whose levels learn with
-        teleports above and below them). The learned options keep learning, warm-started
-        from their frozen policies, in whole-task episodes of the learned hierarchy alone
-        (scripted leaf controllers still run), each on its own decisions with its own
-        reward (``finetune_mode`` says whether all at once or in turns). A seed whose
-        levels' hierarchy already passes the gate at ``finetune_threshold`` (the evaluation
-        before the phase is its first attempt) skips the phase. The phase ends
-        when the teleport-free task success passes a gate at ``finetune_threshold``, when
-        it stops climbing (``finetune_plateau_episodes``) or after
-        ``finetune_max_episodes`` (docs/guide.md, "Fine-tuning").
-      finetune_mode: "joint" (every learned option explores through its own learner and
-        learns from its own decisions in every episode) or "turns" (one option learns at
-        a time while the others act frozen; a turn ends when the option's own running
-        success reaches ``finetune_option_threshold`` or after
-        ``finetune_turn_episodes``). Joint is the default because it measured better on
-        every Craft task at the same budget, the option gets every episode's decisions
-        instead of a turn's share (get_gem 0.843 against 0.766, get_gold 0.93 in ~14,000
-        episodes in all against 0.895 in ~24,500: benchmarks/RESULTS.md section 19); each
-        update costs one learner update per option. Not with a recurrent policy.
-      finetune_threshold: the teleport-free task success the phase stops at (0.92: a gate
-        stops on the first draw that reaches it, a high one, so a final evaluation after
-        a pass at 0.9 landed below 0.9; the margin keeps it at or above).
-      finetune_option_threshold: turns: an option's running success (where the learned
-        hierarchy calls it) that ends its turn early.
-      finetune_max_rest: turns in a row an option may sit out while it is converged: an
-        option whose last turn ended at ``finetune_option_threshold`` or above passes its
-        next turns to the others, up to this many in a row, then plays again to check that
-        it still holds where the hierarchy calls it (0, the default: every option plays
-        every round). Measured neutral: at 3 the root gets twice the turns, yet get_gem's
-        and get_gold's task success climbs no faster per episode (RESULTS section 14).
-      finetune_turn_episodes: environment episodes of one option's turn at most (250:
-        about one chunk; short turns let every option improve a little in each round, and
-        reached in 6,000-8,000 episodes what turns of 2,000 reached in 20,000:
-        benchmarks/RESULTS.md section 13).
-      finetune_continue_episodes: episodes in flight when a turn ends go on into the next
-        turn (only the learner changes hands: its pending decision and episode record start
-        afresh). Off, every turn started all environments on fresh episodes, so each turn's
-        longest episodes (the failing ones, ~1 in 3 of a 250-episode turn over 128
-        environments) were cut off unfinished: no option learned how they end, and the
-        phase's running success, counting finished episodes only, read ~0.05 above a
-        fresh evaluation (benchmarks/RESULTS.md section 18).
-      finetune_max_episodes: the phase's budget in environment episodes, per seed (at
-        12,000, get_gem's and get_gold's totals with the levels stay under 21,000 and
-        19,000 episodes, and their final success is 0.03-0.04 lower: RESULTS section 13;
-        with PPO's ``update_epochs=8``, 16,000 brings get_gold to 0.89-0.91 in ~20,000
-        episodes in all: section 15). The phase keeps
-        climbing past 20,000: get_gem 0.77 -> 0.82 at 60,000 -> 0.84 at 100,000, with the
-        compact observation 0.82 -> 0.85 at 60,000; get_gold passes 0.92 after ~28,000
-        (section 18).
-      finetune_plateau_episodes: the phase also ends once its task success stops climbing:
-        whole-task episodes are taken in blocks of this many, and the phase ends when a
-        block's mean teleport-free task success is less than ``finetune_plateau_gain`` above
-        the block's before it (0: never; then only the gate or the budget end it). Blocks
-        of 4,000 average out the episode-to-episode noise (+-0.008 on a success near 0.85)
-        while a climb of 0.01 per 4,000 episodes still goes on; a task whose gate lies above
-        what its maps allow (get_gem: the oracle's 0.895 below the gate's 0.92) stops where
-        it flattens instead of spending the whole budget (benchmarks/RESULTS.md section 19).
-      finetune_plateau_gain: the least rise of the block mean that counts as still climbing.
-      finetune_agent: learner hyper-parameters that fine-tuning turns use instead of
-        ``agent``'s (e.g. ``{"learning_rate": 1e-3}``); only those the learner keeps as
-        traced leaves (PPO: learning_rate, gae_lambda, clip_eps, ent_coef, vf_coef, target_kl; DQN:
-        learning_rate, epsilon_end, epsilon_decay_steps, target_update_period, tau,
-        reward_scale; actor-critic: learning_rate, vf_coef, ent_coef), so the phase
-        reuses the levels' compiled chunk. In a sweep they override the swept values too.
-      finetune_side_cost: while fine-tuning, a template learner is also rewarded by the
-        decrease of its template's ``side_cost`` where the environment defines one (Craft:
-        items held beyond the one promised), so its run stops leaving behind what the task's
-        reward penalises; F_o success and the levels are unchanged.
-      finetune_side_cost_weight: the side costs' weight (1: as the templates declare them).
-      level_side_cost_weight: the same shaping in the levels, at this weight (0: off): a
-        template learner is charged for what it picks up beyond its promise while it first
-        learns, where teleports below it never do (F_o success and thresholds unchanged).
-      checkpoint_every: seconds between checkpoints when an output directory is given
-        (0: after every chunk); a checkpoint is also written at the end of every level.
+      eval_envs: episodes (one per environment) that measure final_success.
+      eval_max_ticks: cap on an evaluation episode.
+      tensorboard: also write TensorBoard event files to OUT/tensorboard.
+      reset_pool: episode starts generated ahead of each rollout, per seed (None:
+        ``num_envs``; 0: a fresh start per environment per tick, exact but slow where
+        generating a world costs as much as a step).
+      frozen_eval: how a tick runs the frozen policies: "learned" (only the learned options,
+        one after another: cheaper on a CPU), "all" (one batched apply: cheaper on a GPU),
+        "auto" (by backend). The results are the same.
+      policy_memory: "none", or "last_action": the last primitive action and whether it
+        changed the observation, so a policy can tell a blocked move from a new state.
+      finetune: after the levels, fine-tune the learned hierarchy without teleports: "on",
+        "off" or "auto" (on for top-down, whose levels learn with help above and below).
+      finetune_mode: "joint" (every option learns from its own decisions in every episode:
+        more data per option than turns give) or "turns" (one option at a time).
+      finetune_threshold: the teleport-free task success whose gate ends the phase (0.92: the
+        gate stops on a high draw, so the margin keeps the final evaluation at 0.9 or above).
+      finetune_option_threshold: turns: an option's running success that ends its turn.
+      finetune_max_rest: turns: turns in a row a converged option may sit out (0: none).
+      finetune_turn_episodes: turns: episodes of one turn at most (250: about one chunk, so
+        every option improves a little in each round).
+      finetune_continue_episodes: turns: episodes in flight go on into the next turn, so the
+        longest episodes are finished and counted rather than cut off.
+      finetune_max_episodes: the phase's episode budget per seed.
+      finetune_plateau_episodes: the phase also ends when a block of this many episodes
+        gains less than ``finetune_plateau_gain`` over the one before (0: never); 4,000
+        averages out the noise while a slow climb still counts.
+      finetune_plateau_gain: the least rise of a block's mean that counts as climbing.
+      finetune_agent: learner hyper-parameters used in fine-tuning instead of ``agent``'s;
+        only traced leaves (the sweepable ones), so the phase compiles nothing new.
+      finetune_side_cost: in fine-tuning, a template learner is also rewarded by the
+        decrease of its template's ``side_cost`` (Craft: items held beyond the promise).
+      finetune_side_cost_weight: the side cost's weight (1: as the templates declare it).
+      level_side_cost_weight: the same shaping while the levels train (0: off).
+      checkpoint_every: seconds between checkpoints with an output directory (0: every
+        chunk); a checkpoint is also written at the end of every level.
     """
 
     method: str = "top-down"

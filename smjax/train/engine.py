@@ -290,8 +290,7 @@ class Engine:
         An environment whose levels above never called the learner by ``max_ticks`` says
         nothing about it and is left out of the means (``uncalled``: their share): counted
         as failures they held a deep level's gate below its threshold however well the
-        option did where it was called (make_flag's ``give_grass``: 26-40% of environments
-        uncalled in 2,000 ticks, 97% success where called; benchmarks/RESULTS.md 24).
+        option did where it was called.
         ``skip``: start as finished (under ``vmap`` a skipped seed does not keep the loop
         running for the others; its result is meaningless).
 
@@ -354,8 +353,7 @@ class Engine:
         and the seconds this call spent compiling it (0 when already compiled).
 
         (Compiled when first needed, not in a thread beside the training chunk's compile:
-        on the 2-core CPU the two compiles at once took 1.17x as long as one after the
-        other, XLA:CPU's compile already using both cores: benchmarks/RESULTS.md 12.)"""
+        XLA:CPU's compile already keeps the cores busy, so two at once only contend.)"""
         sig = self._signature(args, num_envs)
         compile_s = 0.0
         if sig not in self._compiled_episodes:

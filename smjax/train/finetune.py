@@ -39,8 +39,8 @@ whole-task episodes whose means rise by less than ``finetune_plateau_gain``), or
 Where no gate passed, the phase hands back the better of two hierarchies: the fine-tuned
 one is evaluated on fresh teleport-free episodes (counted as gate episodes) and, if it
 scores below the levels' hierarchy (``final_success_before``), the levels' bank is put
-back. Fine-tuning is not guaranteed to improve a hierarchy: on Fetch, DQN fine-tuning
-turns took the learned hierarchy from 0.74 to 0.23 (benchmarks/RESULTS.md section 13).
+back. Fine-tuning is not guaranteed to improve a hierarchy (DQN fine-tuning can wreck a
+good one), so it never ends worse than the levels left it.
 """
 from __future__ import annotations
 
@@ -299,10 +299,8 @@ class FinetunePhase:
         """The evaluation before the phase is also its first gate (the same fresh
         teleport-free episodes as ``_accept_task``'s): a seed whose levels' hierarchy already
         passes ``finetune_threshold`` has nothing to fine-tune, and its phase ends before it
-        starts. Fetch stack3's levels score 0.92-0.95 there, and joint DQN fine-tuning took
-        two of three such seeds to 0.08 and 0.44 before the better-of-two rule put their
-        levels' banks back, after ~1.2 million env steps each (benchmarks/RESULTS.md
-        section 20)."""
+        starts: fine-tuning a hierarchy that already passes can only cost env steps, and
+        with DQN it can risk the hierarchy."""
         if not self.cfg.gate:
             return
         for s in seeds:
