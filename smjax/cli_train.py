@@ -235,9 +235,11 @@ def cmd_train(args) -> int:
 
 def _write_profile(out) -> None:
     """``--profile``: the timeline on stderr and in OUT/profile.json."""
+    from smjax.train.results import atomic_write_text
+
     print(TIMELINE.report(), file=sys.stderr)
     path = Path(out) / "profile.json"
-    path.write_text(json.dumps(TIMELINE.to_dict(), indent=1) + "\n")
+    atomic_write_text(path, json.dumps(TIMELINE.to_dict(), indent=1) + "\n")
     print(f"wrote {path}", file=sys.stderr)
 
 

@@ -59,11 +59,13 @@ def test_train_resume_render_plot(tmp_path, capsys):
             "--env", "observation=compact", "--set", "rollout_ticks=8", "--set", "eval_envs=8",
             "--finetune-episodes", "60", "--set", "success_window=60", "--set", "gate_envs=8",
             "--out", str(out), "--quiet"]
-    assert main(args) == 0
-    summary = json.loads(capsys.readouterr().out.splitlines()[0])
+    assert main(args + ["--profile"]) == 0
+    printed = capsys.readouterr()
+    summary = json.loads(printed.out.splitlines()[0])
     assert summary["task"] == "get_wood" and summary["method"] == "top-down"
     results = json.loads((out / "results.json").read_text())
     assert results["config"]["num_envs"] == 16
+    _check_profile(json.loads((out / "profile.json").read_text()), printed.err)
     # the same directory again without --resume is refused; --resume of a finished run is fine
     assert main(args) == 2
     assert "already holds" in capsys.readouterr().err
@@ -80,6 +82,24 @@ def test_train_resume_render_plot(tmp_path, capsys):
     png = tmp_path / "overlay.png"
     assert main(["plot", str(out), str(out), "--out", str(png)]) == 0
     assert png.stat().st_size > 5000
+
+
+def _check_profile(profile: dict, printed: str) -> None:
+    """--profile: the command's phases in order, the compiling apart from the work it
+    precedes, JAX's own stages inside them, and the same table on stderr."""
+    spans = {s["label"]: s for s in profile["spans"]}
+    for label in ("interpreter, imports and arguments", "environment, learner and hierarchy",
+                  "training chunks", "compile: training chunks", "gates", "evaluation",
+                  "checkpoint writes", "results.json, curves.csv, curves.png"):
+        assert label in spans and spans[label]["seconds"] >= 0, label
+        assert label in printed
+    starts = [s["start"] for s in profile["spans"]]
+    assert starts == sorted(starts) and starts[0] == 0.0
+    # one program for every level, one for fine-tuning: never one per level
+    assert spans["compile: training chunks"]["count"] <= 2
+    # the phases never overlap: together they fit in the whole command
+    assert sum(s["seconds"] for s in profile["spans"]) <= profile["total_seconds"] + 1e-6
+    assert profile["jax"]["jax: tracing"]["count"] > 0
 
 
 def test_a_users_own_task_is_listed_and_benched(capsys):

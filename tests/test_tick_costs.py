@@ -123,9 +123,9 @@ from smjax.train import TrainConfig
 from smjax.train.run import run
 events = collections.Counter()
 jax.monitoring.register_event_listener(lambda name, **kw: events.update([name.split("/")[-1]]))
-cfg = TrainConfig(num_envs=8, rollout_ticks=4, updates_per_chunk=1, max_episodes_per_level=8,
-                  success_window=4, gate=False, eval_envs=8, eval_max_ticks=20,
-                  finetune_max_episodes=8)
+cfg = TrainConfig(num_envs=int(sys.argv[1]), rollout_ticks=4, updates_per_chunk=1,
+                  max_episodes_per_level=8, success_window=4, gate=False, eval_envs=8,
+                  eval_max_ticks=20, finetune_max_episodes=8)
 run(make_keydoor(), cfg, [0], progress=False)
 print(json.dumps({"hits": events["cache_hits"], "misses": events["cache_misses"]}))
 """
@@ -145,11 +145,11 @@ print(json.dumps({"hits": events["cache_hits"], "misses": events["cache_misses"]
 """
 
 
-def _run_in_subprocess(env_vars: dict, code: str = _TWICE) -> dict:
+def _run_in_subprocess(env_vars: dict, code: str = _TWICE, num_envs: int = 8) -> dict:
     env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
     env.update(env_vars, PYTHONPATH=os.pathsep.join([str(ROOT / "tests"), str(ROOT)]))
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                         text=True, check=True, timeout=600)
+    out = subprocess.run([sys.executable, "-c", code, str(num_envs)], env=env,
+                         capture_output=True, text=True, check=True, timeout=600)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -161,6 +161,12 @@ def test_a_second_identical_run_loads_its_programs_from_the_cache(tmp_path):
     second = _run_in_subprocess({"SMJAX_CACHE_DIR": str(cache)})
     # every program the first run compiled is loaded, none compiled again
     assert second["misses"] == 0 and second["hits"] >= first["misses"], (first, second)
+    # a run is a few dozen programs: host-side plumbing (banks, stacking, example
+    # observations) is not run op by op, which compiled one tiny program per primitive
+    assert first["misses"] <= 60, first
+    # another batch size is another program: compiled anew, never the old one loaded
+    other = _run_in_subprocess({"SMJAX_CACHE_DIR": str(cache)}, num_envs=16)
+    assert other["misses"] > 0, other
     # the opt-out neither writes nor reads (the same program is cached without it)
     on, off = tmp_path / "on", tmp_path / "off"
     used = _run_in_subprocess({"SMJAX_CACHE_DIR": str(on)}, _ONE_PROGRAM)

@@ -30,7 +30,7 @@ from pathlib import Path
 LOCK_NAME = ".smjax.lock"
 # what a run writes into its directory; --overwrite deletes those of them found
 RUN_FILES = ("results.json", "curves.csv", "curves.png", "checkpoints", "tensorboard",
-             "sweep.json")
+             "sweep.json", "profile.json")
 
 
 class OutDirError(ValueError):

@@ -7,8 +7,9 @@ held item with its count and a three-letter name.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-from PIL import Image, ImageDraw, ImageFont
 
 from smjax.envs.craft import constants as C
 
@@ -35,11 +36,20 @@ def _colour(kind: int) -> tuple[int, int, int]:
 
 
 COLOURS = np.array([_colour(k) for k in range(C.NUM_KINDS)], np.uint8)
-_FONT = ImageFont.load_default()
+
+
+@functools.cache
+def _font():
+    from PIL import ImageFont
+
+    return ImageFont.load_default()
 
 
 def render_state(grid, pos, direction, inventory) -> np.ndarray:
     """RGB uint8 (H, W, 3) for one state given as arrays (jax or numpy)."""
+    # Pillow only where a picture is drawn: a training run never imports it
+    from PIL import Image, ImageDraw
+
     grid = np.asarray(grid)
     inventory = np.asarray(inventory)
     if grid.shape != (N, N):
@@ -63,7 +73,7 @@ def render_state(grid, pos, direction, inventory) -> np.ndarray:
                 continue
             left, top = gx * CELL, (N - 1 - gy) * CELL
             draw.text((left + 4, top + 2), C.GLYPH_OF_KIND.get(kind, "?"), fill=(0, 0, 0),
-                      font=_FONT)
+                      font=_font())
     # Agent: disc plus a wedge towards the facing direction.
     left, top = x * CELL, (N - 1 - y) * CELL
     cx, cy = left + CELL / 2, top + CELL / 2
@@ -82,5 +92,5 @@ def render_state(grid, pos, direction, inventory) -> np.ndarray:
         draw.rectangle([left, top, left + 13, top + 13], fill=tuple(int(c) for c in COLOURS[kind]),
                        outline=(0, 0, 0))
         label = f"{int(inventory[kind])}{C.KIND_NAMES[kind][:3]}"
-        draw.text((left + 16, top + 1), label, fill=(0, 0, 0), font=_FONT)
+        draw.text((left + 16, top + 1), label, fill=(0, 0, 0), font=_font())
     return np.asarray(pil, np.uint8)
