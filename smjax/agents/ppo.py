@@ -36,7 +36,9 @@ from smjax.agents.networks import (
     take_action,
     torso_grids,
 )
-from smjax.agents.ppo_update import decision_data, decision_order, finish, kl_stop, loss_terms
+from smjax.agents.ppo_options import make_update_options
+from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, finish, kl_stop,
+                                     loss_terms)
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,10 @@ class PPOConfig:
     normalize_advantages: bool = True
     clip_value_loss: bool = True
     adam_eps: float = 1e-5
+    # Joint fine-tuning's update (a learner per option) runs each option's decisions
+    # through its network in blocks of this many rows (``ppo_options``): the speed
+    # changes, the result does not (up to the order of float sums)
+    option_block: int = 128
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -90,6 +96,7 @@ class PPOConfig:
         checks.check_positive_int(self, "update_epochs")
         checks.check_positive_int(self, "num_minibatches")
         checks.check_range(self, "target_kl", 0.0)
+        checks.check_positive_int(self, "option_block")
         checks.check_hidden_sizes(self)
         checks.check_non_negative_int(self, "recurrent_size")
         checks.check_torso(self)
@@ -210,11 +217,6 @@ def unroll(network: RecurrentActorCritic, params, inputs) -> tuple[jax.Array, ja
     return logits, value
 
 
-def apply_if(pred: jax.Array, new: Any, old: Any) -> Any:
-    """Keep ``old`` when ``pred`` is False (a step with nothing to learn from)."""
-    return jax.tree.map(lambda n, o: jnp.where(pred, n, o), new, old)
-
-
 def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
     """``layout``: the observation's grids (``Environment.observation_layout``), read by a
     "conv" torso."""
@@ -311,4 +313,6 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
     if memory:
         return Agent("ppo", init, act_recurrent, update, policy_logits_recurrent,
                      sweepable=SWEEPABLE, hidden_size=memory)
-    return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE)
+    return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE,
+                 update_options=make_update_options(config, network_for, optimizer,
+                                                            config.option_block))

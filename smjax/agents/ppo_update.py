@@ -76,6 +76,11 @@ def loss_terms(config, logits, value, batch, hp, mean=masked_mean):
     return total, aux
 
 
+def apply_if(pred: jax.Array, new, old):
+    """Keep ``old`` when ``pred`` is False (a step with nothing to learn from)."""
+    return jax.tree.map(lambda n, o: jnp.where(pred, n, o), new, old)
+
+
 def kl_stop(stopped, has_decision, approx_kl, hp):
     """Past the drift limit (``PPOConfig.target_kl``), this minibatch and every later one
     leave the parameters alone; the KL is that of the parameters before this step."""
