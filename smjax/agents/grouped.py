@@ -45,10 +45,11 @@ def grouped_grads(block_loss: Callable, params: Any, counts: jax.Array,
         i, grads, sums = carry
         o = jnp.sum(ends <= i).astype(jnp.int32)  # the option whose blocks cover block i
         j = (i - (ends[o] - blocks[o])) * block + rows
-        own = jax.tree.map(lambda x: x[o], params)
+        mine = jnp.arange(num_options) == o
+        own = jax.tree.map(lambda x: _pick(mine, x), params)
         (loss, aux), g = grad_fn(own, o, j, j < counts[o])
-        grads = jax.tree.map(lambda acc, x: acc.at[o].add(x), grads, g)
-        sums = jax.tree.map(lambda acc, x: acc.at[o].add(x), sums, dict(aux, loss=loss))
+        grads = jax.tree.map(lambda acc, x: acc + _spread(mine, x), grads, g)
+        sums = jax.tree.map(lambda acc, x: acc + _spread(mine, x), sums, dict(aux, loss=loss))
         return i + 1, grads, sums
 
     zeros = jax.tree.map(jnp.zeros_like, params)
@@ -58,3 +59,16 @@ def grouped_grads(block_loss: Callable, params: Any, counts: jax.Array,
     init = (jnp.zeros((), counts.dtype), zeros, sums)
     _, grads, sums = jax.lax.while_loop(lambda c: c[0] < ends[-1], body, init)
     return grads, sums
+
+
+# Selecting an option's parameters and adding to its gradient by a one-hot product
+# rather than an index: under ``vmap`` (seeds) an index becomes a gather or a scatter,
+# which XLA:CPU runs element by element; the products are dense and cheap (O is small).
+def _pick(mine: jax.Array, stacked: jax.Array) -> jax.Array:
+    """``stacked[o]`` for the one-hot ``mine`` [O]."""
+    return jnp.tensordot(mine.astype(stacked.dtype), stacked, axes=1)
+
+
+def _spread(mine: jax.Array, x: jax.Array) -> jax.Array:
+    """``x`` at option o of a stacked ``[O, ...]`` zero, for the one-hot ``mine``."""
+    return mine.astype(x.dtype).reshape((-1,) + (1,) * x.ndim) * x
