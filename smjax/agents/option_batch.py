@@ -23,8 +23,8 @@ from smjax.core.transition import Transition
 
 
 class OptionBatch(NamedTuple):
-    """``obs``: the observation table ``[R, ...]`` (the rollout's ticks, then every
-    option's pending rows); ``traj``: each option's record ``Transition [O, T+1, B]``
+    """``obs``: the observation table ``[R, ...]`` (a zero row, the rollout's ticks, then
+    every option's pending rows); ``traj``: each option's record ``Transition [O, T+1, B]``
     (row 0: its pending decisions) whose ``obs`` is the int32 row in ``obs``."""
 
     obs: jax.Array
@@ -43,9 +43,12 @@ def joint_batch(pending: Transition, traj: Transition) -> tuple[OptionBatch, Tra
     batch (option axis first) and the new pending rows ``[O, B]``, as
     ``carry_pending`` gives them option by option."""
     T, B, O = traj.decision.shape
-    ticks = jnp.arange(T * B, dtype=jnp.int32).reshape(T, B)
-    held = T * B + jnp.arange(O * B, dtype=jnp.int32).reshape(O, B)
-    table = jnp.concatenate([traj.obs.reshape((T * B,) + traj.obs.shape[2:]),
+    # row 0 is a zero observation: that of a pending row that never held a decision
+    # (``no_pending``'s, whose row index is 0)
+    ticks = 1 + jnp.arange(T * B, dtype=jnp.int32).reshape(T, B)
+    held = 1 + T * B + jnp.arange(O * B, dtype=jnp.int32).reshape(O, B)
+    table = jnp.concatenate([jnp.zeros((1,) + traj.obs.shape[2:], traj.obs.dtype),
+                             traj.obs.reshape((T * B,) + traj.obs.shape[2:]),
                              pending.obs.reshape((O * B,) + pending.obs.shape[2:])])
 
     def option_first(x):
