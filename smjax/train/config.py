@@ -114,8 +114,10 @@ class TrainConfig:
         ``finetune_turn_episodes``). Joint is the default because it measured better on
         every Craft task at the same budget, the option gets every episode's decisions
         instead of a turn's share (get_gem 0.843 against 0.766, get_gold 0.93 in ~14,000
-        episodes in all against 0.895 in ~24,500: benchmarks/RESULTS.md section 19); each
-        update costs one learner update per option. Not with a recurrent policy.
+        episodes in all against 0.895 in ~24,500: benchmarks/RESULTS.md section 19). With
+        a learner that trains every option at once (``Agent.update_options``: PPO) an
+        update costs about one learner's update on the rollout's decisions; otherwise one
+        learner update per option. Not with a recurrent policy.
       finetune_threshold: the teleport-free task success the phase stops at (0.92: a gate
         stops on the first draw that reaches it, a high one, so a final evaluation after
         a pass at 0.9 landed below 0.9; the margin keeps it at or above).
