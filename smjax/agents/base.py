@@ -24,6 +24,11 @@ An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over
   program (a hyper-parameter sweep). Their values live in the learner state
   (``state.hp``, float32 scalars, one per slot under ``vmap``) rather than being closed
   over, so a sweep compiles once; every other field fixes shapes or program structure
+* ``update_options(states, batch, key) -> (states, metrics)`` (optional): one update of
+  a learner per option (``states``: leading axis O) on an ``OptionBatch``
+  (``smjax.agents.option_batch``), each option from its own decisions only, with the
+  same results as ``update`` option by option; its work follows the decisions in the
+  batch. None: ``option_batch.each_option(update)`` runs ``update`` once per option
 * ``hidden_size``: 0 for a memoryless policy. A *recurrent* learner (``hidden_size`` H > 0)
   carries a memory ``h [B, H]`` from each of its decisions to its next one:
   ``act(state, obs, mask, key, h) -> (ActOutput, h')`` and
@@ -53,6 +58,7 @@ class Agent(NamedTuple):
     warm_start: Callable[[Any, Any], Any] = lambda state, params: state.replace(params=params)
     sweepable: tuple[str, ...] = ()
     hidden_size: int = 0
+    update_options: Callable[..., tuple[Any, dict]] | None = None
 
 
 def hyper_params(config: Any, names: tuple[str, ...]) -> dict[str, jax.Array]:

@@ -31,14 +31,14 @@ from smjax.agents.networks import (
     RecurrentActorCritic,
     epsilon_mixture_log_probs,
     flatten_obs,
-    masked_entropy,
     masked_log_softmax,
-    masked_mean,
     sample_from_log_probs,
     take_action,
     torso_grids,
 )
-from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_gae
+from smjax.agents.ppo_options import make_update_options
+from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, finish, kl_stop,
+                                     loss_terms)
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,10 @@ class PPOConfig:
     normalize_advantages: bool = True
     clip_value_loss: bool = True
     adam_eps: float = 1e-5
+    # Joint fine-tuning's update (a learner per option) runs each option's decisions
+    # through its network in blocks of this many rows (``ppo_options``): the speed
+    # changes, the result does not (up to the order of float sums)
+    option_block: int = 128
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -89,6 +93,7 @@ class PPOConfig:
         checks.check_positive_int(self, "update_epochs")
         checks.check_positive_int(self, "num_minibatches")
         checks.check_range(self, "target_kl", 0.0)
+        checks.check_positive_int(self, "option_block")
         checks.check_hidden_sizes(self)
         checks.check_non_negative_int(self, "recurrent_size")
         checks.check_torso(self)
@@ -175,8 +180,7 @@ def minibatch_indices(key: jax.Array, decision: jax.Array, num_minibatches: int)
     num_items = decision.shape[0]
     size = -(-num_items // num_minibatches)
     pad = num_minibatches * size - num_items
-    noise = jax.random.uniform(key, (num_items,))
-    order = jnp.argsort(jnp.where(decision, noise, noise + 2.0))
+    order = decision_order(key, decision)
     idx = jnp.concatenate([order, jnp.zeros((pad,), order.dtype)])
     real = jnp.concatenate([jnp.ones((num_items,), bool), jnp.zeros((pad,), bool)])
     return idx.reshape(size, num_minibatches).T, real.reshape(size, num_minibatches).T
@@ -208,11 +212,6 @@ def unroll(network: RecurrentActorCritic, params, inputs) -> tuple[jax.Array, ja
     init = (jnp.zeros_like(stored[0]), jnp.zeros(decided.shape[1:], bool))
     _, (logits, value) = jax.lax.scan(step, init, (features, stored, decided, done))
     return logits, value
-
-
-def apply_if(pred: jax.Array, new: Any, old: Any) -> Any:
-    """Keep ``old`` when ``pred`` is False (a step with nothing to learn from)."""
-    return jax.tree.map(lambda n, o: jnp.where(pred, n, o), new, old)
 
 
 def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
@@ -254,70 +253,25 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
             params, flatten_obs(obs), hidden)
         return logits, hidden
 
-    def loss_terms(logits, value, batch, hp):
-        action, mask, old_log_prob, old_value, adv, ret, weight = batch
-        log_prob = take_action(masked_log_softmax(logits, mask), action)
-        log_ratio = log_prob - old_log_prob
-        ratio = jnp.exp(log_ratio)
-        clip_eps = hp["clip_eps"]
-        clipped = jnp.clip(ratio, 1.0 - clip_eps, 1.0 + clip_eps)
-        policy_loss = masked_mean(-jnp.minimum(ratio * adv, clipped * adv), weight)
-        value_err = jnp.square(value - ret)
-        if config.clip_value_loss:
-            value_clipped = old_value + jnp.clip(value - old_value, -clip_eps, clip_eps)
-            value_err = jnp.maximum(value_err, jnp.square(value_clipped - ret))
-        value_loss = 0.5 * masked_mean(value_err, weight)
-        entropy = masked_mean(masked_entropy(logits, mask), weight)
-        total = policy_loss + hp["vf_coef"] * value_loss - hp["ent_coef"] * entropy
-        aux = {
-            "policy_loss": policy_loss,
-            "value_loss": value_loss,
-            "entropy": entropy,
-            # (r - 1) - log r: a low-variance, non-negative estimate of KL(old || new).
-            "approx_kl": masked_mean((ratio - 1.0) - log_ratio, weight),
-            "clip_fraction": masked_mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32), weight),
-        }
-        return total, aux
-
     def loss_fn(params, batch, hp):
         mask = batch[2]
         if memory:  # [T, B_mb, ...] sequences: whole rollouts of some environments
             logits, value = unroll(network_for(mask.shape[-1]), params, batch[0])
         else:       # [N] ticks
             logits, value = network_for(mask.shape[-1]).apply(params, batch[0])
-        return loss_terms(logits, value, batch[1:], hp)
+        return loss_terms(config, logits, value, batch[1:], hp)
 
     def update(state: PolicyGradientState, traj: Transition, key: jax.Array):
         traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
         num_ticks, num_envs = traj.reward.shape[:2]
         num_items = num_ticks * num_envs
         # Train on complete decisions; a pending one returns in the next rollout (smdp.py).
-        decision = traj.decision.astype(bool)
-        adv, ret = smdp_gae(traj.reward, traj.discount, traj.done, decision,
-                            jnp.where(decision, traj.value, 0.0), state.hp["gae_lambda"])
-        episodes = episodes_with_decision(traj.done, decision)
-        decision = complete_decisions(traj.done, decision)
-        if config.normalize_advantages:
-            mean = masked_mean(adv, decision)
-            var = masked_mean(jnp.square(adv - mean), decision)
-            adv = jnp.where(decision, (adv - mean) / (jnp.sqrt(var) + 1e-8), 0.0)
-        # Fields of non-decision ticks are unspecified (may be NaN): zero them so that no
-        # NaN can reach a gradient through the weight-0 entries.
-        unused_to_zero = lambda x: jnp.where(decision, x, 0)  # noqa: E731
+        fields, episodes = decision_data(config, traj, state.hp)
         obs = flatten_obs(traj.obs, batch_dims=2)
         if memory:  # the unroll also needs the memory, decided and done of every tick
             obs = (obs, traj.hidden.astype(jnp.float32), traj.decision.astype(bool),
                    traj.done.astype(bool))
-        data = (
-            obs,
-            unused_to_zero(traj.action).astype(jnp.int32),
-            traj.action_mask.astype(bool),
-            unused_to_zero(traj.log_prob).astype(jnp.float32),
-            unused_to_zero(traj.value).astype(jnp.float32),
-            adv,
-            ret,
-            decision,
-        )
+        data = (obs,) + fields
         if memory:  # minibatches are sets of environments, each with its whole rollout
             take = lambda x, idx: x[:, idx]  # noqa: E731
             weight_of = lambda w, real: w & real[None, :]  # noqa: E731
@@ -336,11 +290,7 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
             updates = scale_by_lr(updates, state.hp["learning_rate"])
             new_params = optax.apply_updates(params, updates)
             has_decision = jnp.any(batch[-1])
-            # the KL is that of the parameters before this step: past the limit, this
-            # minibatch and every later one leave them alone
-            target_kl = state.hp["target_kl"]
-            stopped = stopped | (has_decision & (target_kl > 0)
-                                 & (aux["approx_kl"] > 1.5 * target_kl))
+            stopped = kl_stop(stopped, has_decision, aux["approx_kl"], state.hp)
             step = has_decision & ~stopped
             params, opt_state = apply_if(step, (new_params, new_opt_state), (params, opt_state))
             aux = dict(aux, total_loss=total, counted=has_decision.astype(jnp.float32))
@@ -355,29 +305,11 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
         carry = (state.params, state.opt_state, state.grad_steps, jnp.zeros((), bool))
         epoch_keys = jax.random.split(key, config.update_epochs)
         (params, opt_state, grad_steps, stopped), aux = jax.lax.scan(epoch_step, carry, epoch_keys)
-        counted = aux.pop("counted")
-        metrics = {name: masked_mean(value, counted) for name, value in aux.items()}
-        num_decisions = decision.sum().astype(jnp.int32)
-        new_state = PolicyGradientState(
-            params=params,
-            opt_state=opt_state,
-            grad_steps=grad_steps,
-            updates=state.updates + 1,
-            episodes_seen=state.episodes_seen + episodes,
-            decisions_seen=state.decisions_seen + num_decisions,
-            hp=state.hp,
-        )
-        metrics.update(
-            decisions=num_decisions,
-            mean_advantage=masked_mean(adv, decision),
-            mean_return=masked_mean(ret, decision),
-            episodes_seen=new_state.episodes_seen,
-            grad_steps=grad_steps,
-            kl_stopped=stopped.astype(jnp.float32),
-        )
-        return new_state, metrics
+        return finish(state, params, opt_state, grad_steps, stopped, aux, episodes, fields)
 
     if memory:
         return Agent("ppo", init, act_recurrent, update, policy_logits_recurrent,
                      sweepable=SWEEPABLE, hidden_size=memory)
-    return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE)
+    return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE,
+                 update_options=make_update_options(config, network_for, optimizer,
+                                                            config.option_block))

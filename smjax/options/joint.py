@@ -22,8 +22,9 @@ learner would have recorded had it been the only learner:
 
 The observation is shared by all options. A record is a ``Transition`` whose per-option
 fields are ``[B, O]`` (``[B, O, A]`` for the mask); under a rollout's scan they become
-``[T, B, O]``, and ``OPTION_AXES`` maps a learner update over the option axis (the
-observation is not copied per option).
+``[T, B, O]``; ``OPTION_AXES`` names the option axis of each field (the observation is
+shared, not copied per option). The trainer hands every option's record to the learners
+at once (``smjax.agents.option_batch``).
 
 Each option's rows are those of the option alone: its decisions, its reward, its ends;
 nothing of another option's record reaches it (tests/test_joint.py checks the masks).

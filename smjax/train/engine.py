@@ -14,10 +14,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from smjax.agents.option_batch import joint_batch, options_update
 from smjax.agents.smdp import carry_pending
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
-from smjax.options.joint import OPTION_AXES
 from smjax.options.runner import (NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats,
                                   option_temperatures)
 from smjax.train.config import TrainConfig
@@ -233,11 +233,11 @@ class Engine:
         return learner, carry.replace(pending=pending), metrics
 
     def _learn_joint(self, learners, carry: EnvCarry, traj, key):
-        """Every option's update on its own rows of the rollout (``OPTION_AXES``), each
-        with its own pending decisions (``carry.pending``: leading axis O)."""
-        keys = jax.random.split(key, self.h.num_options)
-        learners, pending, metrics = jax.vmap(self._update, (0, 0, OPTION_AXES, 0))(
-            learners, carry.pending, traj, keys)
+        """Every option's update on its own rows of the rollout, each with its own pending
+        decisions (``carry.pending``: leading axis O), in one ``update_options`` (the
+        agent's, whose work follows the decisions, or one update per option)."""
+        batch, pending = joint_batch(carry.pending, traj)
+        learners, metrics = options_update(self.agent)(learners, batch, key)
         return learners, carry.replace(pending=pending), metrics
 
     def _updates(self, state: SeedState, active, controls: Controls, bank, learn, windows,

@@ -1,0 +1,169 @@
+"""What joint fine-tuning's update costs: one learner per option over every row, against
+every option at once on its own decisions (``Agent.update_options``).
+
+Builds the trainer's ``Engine`` for a task (the CLI's shapes: seeds x envs x ticks x
+updates), records one joint rollout per seed (every option learned, exploring through
+its own learner), and times, as compiled, seed-vmapped programs on the same inputs:
+
+* ``update``: one joint update, three ways: ``vmap`` (each option's ``carry_pending`` and
+  ``update`` over its rows, mapped over the options with ``OPTION_AXES``: the update
+  before ``update_options`` existed), ``each_option`` (the fallback of an agent without
+  ``update_options``) and ``grouped`` (the agent's ``update_options``);
+* ``chunk``: ``Engine.joint_chunk`` as the trainer calls it (rollouts + updates), for an
+  agent without ``update_options`` and with it.
+
+The variants alternate within every repeat, so a noisy (shared) machine hits each alike;
+medians are printed, with the ratio to the first variant.
+
+    python benchmarks/joint_update_cost.py --task craft/get_gem --env observation=compact \
+        --seeds 2 --repeats 7
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+
+
+def build(args, agent_cfg: dict):
+    import smjax
+    from smjax.train.config import TrainConfig
+    from smjax.train.engine import Engine, make_learner
+    from smjax.train.plans import resolve_hierarchy
+
+    env, params = smjax.make(args.task, **dict(kv.split("=", 1) for kv in args.env))
+    cfg = TrainConfig(num_envs=args.num_envs, rollout_ticks=args.rollout_ticks,
+                      updates_per_chunk=args.updates, agent=agent_cfg)
+    _, h = resolve_hierarchy(env, cfg)
+    agent = make_learner(env, params, cfg)
+    return Engine(env, params, h, agent, cfg), agent._replace(update_options=None)
+
+
+def joint_state(engine, seeds: int):
+    keys = jax.random.split(jax.random.PRNGKey(0), 4 * seeds).reshape(4, seeds, 2)
+    fresh = engine.init_learner(keys[0])
+    return engine.joint_state(fresh, engine.new_bank(engine.init_learner(keys[1])), keys[2],
+                              keys[3])
+
+
+def record_rollout(engine, state, learned):
+    """Every seed's joint record of one rollout ``[S, T, B, O]``."""
+    from smjax.options.runner import NO_OPTION, Controls
+
+    O = engine.h.num_options
+
+    def one(st, learned_s):
+        controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), learned_s,
+                            jnp.asarray(False), jnp.asarray(False), side_cost=jnp.asarray(0.0),
+                            gamma=jnp.full((O,), 0.99, jnp.float32), acts_frozen=True,
+                            joint=True)
+
+        def tick(c, k):
+            c, tr, _ = engine.runner.tick(c, k, st.learner, None, controls)
+            return c, tr
+
+        return jax.lax.scan(tick, st.carry, jax.random.split(st.key, engine.cfg.rollout_ticks))[1]
+
+    return jax.jit(jax.vmap(one))(state, learned)
+
+
+def update_variants(engine, plain_agent):
+    """The three joint updates, each ``(learners [O], pending [O, B], traj, key) -> params``."""
+    from smjax.agents.option_batch import each_option, joint_batch
+    from smjax.agents.smdp import carry_pending
+    from smjax.options.joint import OPTION_AXES
+
+    def vmapped(learners, pending, traj, key):
+        def one(learner, pend, tr, k):
+            tr, _ = carry_pending(pend, tr)
+            return plain_agent.update(learner, tr, k)[0]
+
+        keys = jax.random.split(key, engine.h.num_options)
+        return jax.vmap(one, (0, 0, OPTION_AXES, 0))(learners, pending, traj, keys).params
+
+    def batched(update_options):
+        def run(learners, pending, traj, key):
+            batch, _ = joint_batch(pending, traj)
+            return update_options(learners, batch, key)[0].params
+        return run
+
+    return {"vmap": vmapped, "each_option": batched(each_option(plain_agent.update)),
+            "grouped": batched(engine.agent.update_options)}
+
+
+def timed(fn, make_args, out: dict, name: str) -> None:
+    """One call of ``fn`` on fresh arguments; the first call (compile included) apart."""
+    args = make_args()
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(*args))
+    seconds = time.perf_counter() - t0
+    if name not in out:
+        out[name] = {"first_s": seconds, "runs": []}
+    else:
+        out[name]["runs"].append(seconds)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--task", default="craft/get_gem")
+    ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--num-envs", type=int, default=128)
+    ap.add_argument("--rollout-ticks", type=int, default=32)
+    ap.add_argument("--updates", type=int, default=4, help="updates (rollouts) per chunk")
+    ap.add_argument("--block", type=int, default=None, help="PPO option_block (default: its own)")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--skip-chunk", action="store_true")
+    args = ap.parse_args(argv)
+    agent_cfg = {} if args.block is None else {"option_block": args.block}
+    engine, plain = build(args, agent_cfg)
+    S, O = args.seeds, engine.h.num_options
+    state = joint_state(engine, S)
+    learned = jnp.ones((S, O), bool)
+    traj = record_rollout(engine, state, learned)
+    print("decisions per option (seed 0):", traj.decision[0].sum((0, 1)).tolist(),
+          f"of {args.rollout_ticks} x {args.num_envs} ticks", flush=True)
+    pending = state.carry.pending
+    key = jax.random.split(jax.random.PRNGKey(5), S)
+    progs = {name: jax.jit(jax.vmap(fn)) for name, fn in update_variants(engine, plain).items()}
+    chunks = {}
+    if not args.skip_chunk:
+        from smjax.train.engine import Engine
+        from smjax.train.state import SuccessWindow
+
+        old = Engine(engine.env, engine.env_params, engine.h, plain, engine.cfg)
+        windows = (SuccessWindow.empty(S, 256), SuccessWindow.empty(S, 256))
+        rest = (jnp.ones((S,), bool), learned, jnp.zeros((S,), jnp.float32),
+                jnp.full((S, O), 0.99, jnp.float32), windows,
+                jnp.tile(jnp.asarray([256, 256], jnp.int32), (S, 1)))
+        chunks = {"chunk_each_option": (old, rest), "chunk_grouped": (engine, rest)}
+    out: dict = {}
+    for _ in range(args.repeats + 1):  # the first round compiles
+        for name, prog in progs.items():
+            timed(prog, lambda: (state.learner, pending, traj, key), out, name)
+        for name, (eng, rest) in chunks.items():  # (the chunk consumes its state: a copy)
+            timed(lambda st, *r, e=eng: e.joint_chunk(st, *r)[1],
+                  lambda: (jax.tree.map(jnp.copy, state),) + rest, out, name)
+    report(out, args)
+
+
+def report(out: dict, args) -> None:
+    base = {}
+    for name, rec in out.items():
+        med = statistics.median(rec["runs"])
+        group = name.split("_")[0] if name.startswith("chunk") else "update"
+        base.setdefault(group, (name, med))
+        ref, ref_med = base[group]
+        print(f"{name:18s} median {med:8.3f} s of {len(rec['runs'])} (first call with compile "
+              f"{rec['first_s']:.1f} s); {med / ref_med:.2f}x of {ref}, "
+              f"{ref_med / med:.2f}x faster", flush=True)
+    print(f"task {args.task} {args.env} seeds {args.seeds} envs {args.num_envs} ticks "
+          f"{args.rollout_ticks} updates/chunk {args.updates} on "
+          f"{jax.devices()[0].platform}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

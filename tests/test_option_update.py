@@ -1,0 +1,123 @@
+"""A learner per option updated at the price of one (``Agent.update_options``): the same
+result as each option's own update, each option from its own decisions only."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from smjax.agents import make_agent
+from smjax.agents.grouped import grouped_grads
+from smjax.agents.option_batch import each_option, joint_batch
+from smjax.agents.smdp import carry_pending
+from smjax.core.transition import Transition, no_pending
+from smjax.options.joint import OPTION_AXES
+
+T, B, O, A, F = 7, 5, 4, 6, 9
+IDLE = 2  # an option with no decision in the record
+
+
+def _record(seed: int) -> Transition:
+    """A random joint record [T, B, O] (obs shared); option IDLE never decides."""
+    k = jax.random.split(jax.random.PRNGKey(seed), 8)
+    decision = jax.random.bernoulli(k[3], 0.4, (T, B, O)).at[:, :, IDLE].set(False)
+    return Transition(
+        obs=jax.random.normal(k[0], (T, B, F)),
+        action=jax.random.randint(k[1], (T, B, O), 0, A),
+        action_mask=jax.random.bernoulli(k[6], 0.8, (T, B, O, A)).at[..., 0].set(True),
+        log_prob=-jax.random.uniform(k[7], (T, B, O), minval=0.5, maxval=2.0),
+        value=jax.random.normal(k[2], (T, B, O)), decision=decision,
+        reward=jax.random.uniform(k[4], (T, B, O)),
+        discount=jnp.full((T, B, O), 0.97, jnp.float32),
+        done=jax.random.bernoulli(k[5], 0.15, (T, B, O)))
+
+
+def _pending(seed: int) -> Transition:
+    """Every option's pending rows [O, B]: some decisions still running (not IDLE's)."""
+    k = jax.random.split(jax.random.PRNGKey(seed + 100), 3)
+    empty = no_pending(jnp.zeros((B, F)), A)
+    rows = jax.tree.map(lambda x: jnp.repeat(x[None], O, 0), empty)
+    return rows._replace(
+        obs=jax.random.normal(k[0], (O, B, F)),
+        decision=jax.random.bernoulli(k[1], 0.5, (O, B)).at[IDLE].set(False),
+        reward=jax.random.uniform(k[2], (O, B)), discount=jnp.full((O, B), 0.9, jnp.float32))
+
+
+def _states(agent, seed: int):
+    keys = jax.random.split(jax.random.PRNGKey(seed + 200), O)
+    return jax.tree.map(lambda *x: jnp.stack(x),
+                        *[agent.init(k, jnp.zeros((F,)), A) for k in keys])
+
+
+def _close(a, b, **tol):
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), **tol)
+
+
+def test_the_batch_carries_pending_rows_as_each_option_did():
+    # the one-table batch holds, per option, what carry_pending over that option's record
+    # (observations copied) gave, and the same new pending rows
+    traj, pending = _record(0), _pending(0)
+    batch, new_pending = joint_batch(pending, traj)
+    want, want_pending = jax.vmap(carry_pending, (0, OPTION_AXES))(pending, traj)
+    _close(batch.traj._replace(obs=batch.observations()), want, rtol=0, atol=0)
+    _close(new_pending, want_pending, rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("block", [1, 3, 128])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_grouped_update_equals_each_options_update(block, seed):
+    # same parameters, optimiser states, counters and metrics as update() option by
+    # option, whatever the block size (one row, blocks that split an option's decisions,
+    # one block holding them all)
+    agent = make_agent("ppo", hidden_sizes=(16, 16), num_minibatches=3, update_epochs=2,
+                       option_block=block, target_kl=0.05)
+    batch, _ = joint_batch(_pending(seed), _record(seed))
+    states, key = _states(agent, seed), jax.random.PRNGKey(seed + 7)
+    grouped, g_metrics = jax.jit(agent.update_options)(states, batch, key)
+    alone, a_metrics = jax.jit(each_option(agent.update))(states, batch, key)
+    assert int(a_metrics["decisions"].sum()) > 20  # the options did have decisions
+    _close(grouped, alone, rtol=2e-4, atol=2e-6)
+    assert g_metrics.keys() == a_metrics.keys()
+    for name in a_metrics:
+        np.testing.assert_allclose(np.asarray(g_metrics[name]), np.asarray(a_metrics[name]),
+                                   rtol=2e-4, atol=2e-6, err_msg=name)
+
+
+def test_an_option_without_decisions_keeps_its_parameters():
+    agent = make_agent("ppo", hidden_sizes=(16, 16))
+    batch, _ = joint_batch(_pending(3), _record(3))
+    states = _states(agent, 3)
+    new, metrics = jax.jit(agent.update_options)(states, batch, jax.random.PRNGKey(0))
+    idle = lambda tree: jax.tree.map(lambda x: np.asarray(x[IDLE]), tree)  # noqa: E731
+    _close(idle(new.params), idle(states.params), rtol=0, atol=0)
+    _close(idle(new.opt_state), idle(states.opt_state), rtol=0, atol=0)
+    assert int(metrics["decisions"][IDLE]) == 0 and int(new.grad_steps[IDLE]) == 0
+    busy = [o for o in range(O) if o != IDLE]
+    assert (np.asarray(new.grad_steps)[busy] > 0).all()  # the others did step
+
+
+def test_grouped_gradients_are_each_options_own():
+    # the gradient of option o's loss over its rows 0 .. counts[o] - 1, whatever the block
+    # size, and nothing for an option without rows
+    k = jax.random.split(jax.random.PRNGKey(4), 3)
+    params = {"w": jax.random.normal(k[0], (O, F, 3)), "b": jax.random.normal(k[1], (O, 3))}
+    x = jax.random.normal(k[2], (O, 11, F))
+    counts = jnp.asarray([11, 4, 0, 7], jnp.int32)
+
+    def option_loss(p, rows, weight):
+        return jnp.sum(weight * jnp.tanh(rows @ p["w"] + p["b"]).sum(-1))
+
+    def block_loss(own, o, j, valid):
+        loss = option_loss(own, x[o, jnp.minimum(j, 10)], valid.astype(jnp.float32))
+        return loss, {"rows": valid.sum().astype(jnp.float32)}
+
+    want = [jax.grad(option_loss)(jax.tree.map(lambda a: a[o], params), x[o],
+                                  (jnp.arange(11) < counts[o]).astype(jnp.float32))
+            for o in range(O)]
+    want = jax.tree.map(lambda *g: jnp.stack(g), *want)
+    for block in (1, 4, 16):
+        grads, sums = jax.jit(lambda p, c, b=block: grouped_grads(block_loss, p, c, b))(
+            params, counts)
+        _close(grads, want, rtol=1e-5, atol=1e-6)
+        np.testing.assert_array_equal(np.asarray(sums["rows"]), np.asarray(counts))
+    assert not np.asarray(grads["w"][2]).any()
