@@ -46,3 +46,66 @@ def test_the_timeline_sums_repeated_spans_and_orders_them_by_start():
 def test_the_timeline_starts_at_the_process_start():
     # the interpreter ran before this module was imported: the clock started earlier
     assert Timeline().now() > 0.0
+
+
+def _train(out: Path, cache: Path, *extra: str) -> dict:
+    """A tiny registered-task run in its own process; its results and profile."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), JAX_PLATFORMS="cpu", SMJAX_CACHE_DIR=str(cache))
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    cmd = [sys.executable, "-m", "smjax", "train", "craft/get_wood", "--seeds", "1",
+           "--num-envs", "8", "--max-episodes", "16", "--set", "rollout_ticks=4",
+           "--set", "success_window=8", "--set", "eval_envs=8", "--set", "gate_envs=8",
+           "--finetune-episodes", "16", "--quiet", "--profile", "--overwrite", "--out", str(out),
+           *extra]
+    subprocess.run(cmd, env=env, capture_output=True, text=True, check=True, timeout=600)
+    results = json.loads((out / "results.json").read_text())
+    loaded = json.loads((out / "profile.json").read_text())["jax"].get(
+        "programs loaded as StableHLO (no tracing)", {"count": 0})["count"]
+    return {"final": results["final_success"], "levels": results["levels"], "loaded": loaded}
+
+
+def test_a_repeated_run_loads_its_programs_untraced_and_a_changed_one_does_not(tmp_path):
+    cache = tmp_path / "cache"
+    first = _train(tmp_path / "a", cache)
+    assert first["loaded"] == 0
+    saved = sorted((cache / "smjax-programs").iterdir())
+    assert len(saved) >= 3  # the level chunk, the fine-tuning chunk, the episodes program
+    second = _train(tmp_path / "a", cache)
+    assert second["loaded"] == len(saved)
+    assert second["final"] == first["final"] and second["levels"] == first["levels"]
+    # another config is another program: traced, never the saved one
+    assert _train(tmp_path / "b", cache, "--set", "gamma=0.9")["loaded"] == 0
+    # a damaged entry is dropped and the program traced again, with the same results
+    saved[0].write_bytes(b"not a program")
+    third = _train(tmp_path / "a", cache)
+    assert third["loaded"] == len(saved) - 1 and third["final"] == first["final"]
+
+
+def test_a_program_key_changes_with_everything_the_program_depends_on(monkeypatch):
+    import jax.numpy as jnp
+
+    from smjax.train import program_cache as pc
+
+    args = (jnp.zeros((2, 3)), {"b": jnp.zeros(4, jnp.int32)})
+    base = pc.program_key({"gamma": 0.9}, "chunk", args)
+    assert pc.program_key({"gamma": 0.9}, "chunk", args) == base
+    assert pc.program_key({"gamma": 0.99}, "chunk", args) != base
+    assert pc.program_key({"gamma": 0.9}, "joint_chunk", args) != base
+    assert pc.program_key({"gamma": 0.9}, "chunk", (jnp.zeros((3, 3)), args[1])) != base
+    assert pc.program_key({"gamma": 0.9}, "chunk", (args[0], {"b": jnp.zeros(4)})) != base
+    monkeypatch.setattr(pc, "source_digest", lambda: "other smjax source")
+    assert pc.program_key({"gamma": 0.9}, "chunk", args) != base
+    monkeypatch.undo()
+    platform = pc._platform()
+    monkeypatch.setattr(pc, "_platform", lambda: platform | {"jax": "0.0.0"})
+    assert pc.program_key({"gamma": 0.9}, "chunk", args) != base
+
+
+def test_only_runs_named_by_smjax_code_are_cached():
+    from smjax.train import program_cache as pc
+
+    identity = {"task": "craft/get_wood", "seeds": [0, 1], "gamma": 0.9}
+    named = pc.cacheable_identity("craft/get_wood", None, identity)
+    assert named == {"task": "craft/get_wood", "gamma": 0.9}  # seeds are inputs, not program
+    assert pc.cacheable_identity(("env", "params"), None, identity) is None
+    assert pc.cacheable_identity("craft/get_wood", object(), identity) is None

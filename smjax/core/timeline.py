@@ -63,6 +63,10 @@ class Timeline:
         entry[1] += seconds
         entry[2] += 1
 
+    def count(self, label: str) -> None:
+        """One more of ``label`` (an event without a duration), listed with JAX's totals."""
+        self.jax.setdefault(label, [0.0, 0])[1] += 1
+
     @contextlib.contextmanager
     def span(self, label: str):
         began = self.now()

@@ -21,6 +21,7 @@ from smjax.options.hierarchy import Hierarchy
 from smjax.options.runner import (NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats,
                                   option_temperatures)
 from smjax.train.config import TrainConfig
+from smjax.train.program_cache import compile_program
 
 
 def _same(x):
@@ -120,6 +121,9 @@ class Engine:
                      in_axes=(0, 0, 0, 0, 0, 0, None, 0, None, 0, 0, None)),
             static_argnums=(11,))
         self._compiled_episodes: dict[tuple, Any] = {}
+        # what keys this engine's programs in the program cache (None: not cached); the
+        # run sets it where the task and config name everything the programs depend on
+        self.program_identity: dict | None = None
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         # host-side array plumbing as one program each, not one tiny program per leaf
         self._stack = jax.jit(lambda states: jax.tree.map(lambda *xs: jnp.stack(xs), *states))
@@ -133,6 +137,12 @@ class Engine:
         self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
         # the same episodes for a new learner (a fine-tuning turn's): leading axis S
         self.hand_over = jax.jit(jax.vmap(self.runner.hand_over))
+
+    def compile(self, name: str, jitted, args: tuple, static: tuple = (), donate: tuple = ()):
+        """``jitted`` compiled for ``args``, without tracing where an earlier run saved the
+        same program and ``program_identity`` names everything it depends on
+        (:mod:`smjax.train.program_cache`)."""
+        return compile_program(jitted, args, name, self.program_identity, static, donate)
 
     @property
     def success_bounded(self) -> bool:
@@ -358,7 +368,8 @@ class Engine:
         compile_s = 0.0
         if sig not in self._compiled_episodes:
             t0 = time.perf_counter()
-            self._compiled_episodes[sig] = self.episodes.lower(*args, num_envs).compile()
+            self._compiled_episodes[sig] = self.compile(f"episodes-{num_envs}", self.episodes,
+                                                        args, static=(num_envs,))
             compile_s = time.perf_counter() - t0
         return self._compiled_episodes[sig](*args), compile_s
 

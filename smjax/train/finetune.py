@@ -234,7 +234,8 @@ class FinetunePhase:
                 (a.window, a.task_window), self._per_seed(sizes, jnp.int32))
         if self._compiled_joint is None:
             t0 = time.perf_counter()
-            self._compiled_joint = self.engine.joint_chunk.lower(*args).compile()
+            self._compiled_joint = self.engine.compile("joint_chunk", self.engine.joint_chunk,
+                                                       args, donate=(0,))
             self.state.compile_seconds += time.perf_counter() - t0
         state, stats, metrics, (window, task_window), windows = self._compiled_joint(*args)
         stats, windows = dist.gather((stats, windows))

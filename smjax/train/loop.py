@@ -275,7 +275,7 @@ class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
                 gamma, (a.window, a.task_window), sizes)
         if self._compiled is None:  # one compile serves every level (ids are traced)
             t0 = time.perf_counter()
-            self._compiled = self.engine.chunk.lower(*args).compile()
+            self._compiled = self.engine.compile("chunk", self.engine.chunk, args, donate=(0,))
             self.state.compile_seconds += time.perf_counter() - t0
         state, stats, metrics, (window, task_window), windows = self._compiled(*args)
         stats, windows = dist.gather((stats, windows))  # [S, U, ...], the same on every process

@@ -16,6 +16,7 @@ from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_d
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.loop import HierarchyTrainer, NonFiniteError
+from smjax.train.program_cache import cacheable_identity
 from smjax.train.plans import (declared_identity, plan_levels, reachable_root_threshold,
                                resolve_hierarchy)
 from smjax.train.memory import check_fits
@@ -192,6 +193,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     with TIMELINE.span("memory check, engine and trainer"):
         check_fits(env, env_params, cfg, len(slot_seeds))
         engine = Engine(env, env_params, hierarchy, agent, cfg)
+        engine.program_identity = cacheable_identity(
+            task, given, identity | {"task_name": task, "config": cfg.to_dict()})
         trainer = HierarchyTrainer(engine, plans, slot_seeds, out_dir=out_dir,
                                    progress=progress, run_meta=identity, hp=hp, gamma=gamma)
     if resume:
