@@ -8,6 +8,7 @@ import pytest
 from PIL import Image
 
 from smjax.cli import main
+from smjax.core.timeline import TIMELINE
 
 
 def test_help_lists_commands(capsys):
@@ -53,7 +54,10 @@ def test_bad_input_is_a_clear_error(argv, message, capsys, tmp_path):
     assert message in capsys.readouterr().err
 
 
-def test_train_resume_render_plot(tmp_path, capsys):
+def test_train_resume_render_plot(tmp_path, capsys, monkeypatch):
+    # the timeline is the process's: forget what other tests' runs in this process added
+    monkeypatch.setattr(TIMELINE, "spans", {})
+    monkeypatch.setattr(TIMELINE, "jax", {})
     out = tmp_path / "wood"
     args = ["train", "craft/get_wood", "--seeds", "1", "--num-envs", "16", "--max-episodes", "60",
             "--env", "observation=compact", "--set", "rollout_ticks=8", "--set", "eval_envs=8",

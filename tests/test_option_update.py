@@ -121,3 +121,12 @@ def test_grouped_gradients_are_each_options_own():
         _close(grads, want, rtol=1e-5, atol=1e-6)
         np.testing.assert_array_equal(np.asarray(sums["rows"]), np.asarray(counts))
     assert not np.asarray(grads["w"][2]).any()
+
+
+def test_the_grouped_update_is_chosen_by_backend_unless_named():
+    assert make_agent("ppo", option_update="grouped").update_options is not None
+    assert make_agent("ppo", option_update="per_option").update_options is None
+    # auto: grouped on a CPU (the tests' backend), per option on an accelerator
+    assert (make_agent("ppo").update_options is not None) == (jax.default_backend() == "cpu")
+    with pytest.raises(ValueError, match="option_update"):
+        make_agent("ppo", option_update="sometimes")

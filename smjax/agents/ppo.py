@@ -81,6 +81,12 @@ class PPOConfig:
     # through its network in blocks of this many rows (``ppo_options``): the speed
     # changes, the result does not (up to the order of float sums)
     option_block: int = 128
+    # how joint fine-tuning updates its learners: "grouped" (every option's own decisions
+    # in one pass: the work follows the decisions), "per_option" (each option's update over
+    # the whole batch, masked, vmapped over options: one wide kernel per layer), or "auto"
+    # (grouped on a CPU, where the work is the cost; per option on an accelerator, where
+    # the grouped update's loop of small blocks costs more launches than FLOPs saved)
+    option_update: str = "auto"
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -94,6 +100,7 @@ class PPOConfig:
         checks.check_positive_int(self, "num_minibatches")
         checks.check_range(self, "target_kl", 0.0)
         checks.check_positive_int(self, "option_block")
+        checks.check_choice(self, "option_update", ("auto", "grouped", "per_option"))
         checks.check_hidden_sizes(self)
         checks.check_non_negative_int(self, "recurrent_size")
         checks.check_torso(self)
@@ -310,6 +317,8 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
     if memory:
         return Agent("ppo", init, act_recurrent, update, policy_logits_recurrent,
                      sweepable=SWEEPABLE, hidden_size=memory)
+    grouped = config.option_update == "grouped" or (
+        config.option_update == "auto" and jax.default_backend() == "cpu")
     return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE,
                  update_options=make_update_options(config, network_for, optimizer,
-                                                            config.option_block))
+                                                    config.option_block) if grouped else None)
