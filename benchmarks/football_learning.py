@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 
 import smjax  # noqa: F401  (sets the XLA:CPU workaround before jax starts)
+from smjax.train.bounds import MAX_WINDOW
 from smjax.train import TrainConfig
 from smjax.train.run import run
 
@@ -86,7 +87,7 @@ def make_config(method: str, args, agent: dict) -> TrainConfig:
     # Levels that learn run on their step budget: a success window no run fills keeps the
     # 0.8 threshold (goal difference per game for the root) from stopping them early, so
     # both methods spend the same budget (--stop-at-threshold: the paper's early stop).
-    window = 256 if args.stop_at_threshold else 10**9
+    window = 256 if args.stop_at_threshold else MAX_WINDOW
     if method == "flat":
         return TrainConfig(method="flat", max_steps_per_level=chunks * chunk, success_window=window,
                            **common)

@@ -71,7 +71,7 @@ def test_a_sweep_compiles_once_and_each_point_equals_its_run_alone(tmp_path, low
 @pytest.mark.parametrize("sweep, needle", [
     ({"agent.hidden_sizes": [8]}, "sweepable: gamma, agent.learning_rate"),
     ({"num_envs": [8, 16]}, "cannot be swept"),
-    ({"gamma": [0.9, 1.5]}, "'gamma' = 1.5: must be in"),
+    ({"gamma": [0.9, 1.5]}, "'gamma' = 1.5: must be a number in"),
     ({"agent.nope": [1.0]}, "cannot be swept"),
     ({"agent.learning_rate": ["fast"]}, "must be a finite number"),
     ({"agent.learning_rate": [2.0]}, "learning_rate"),

@@ -111,8 +111,8 @@ def test_baselines_run_through_the_same_engine(method):
 
 
 @pytest.mark.parametrize("field, value, message", [
-    ("num_envs", 0, "'num_envs' = 0: must be an integer >= 1"),
-    ("threshold", 1.5, r"'threshold' = 1.5: must be in \(0, 1\]"),
+    ("num_envs", 0, r"'num_envs' = 0: must be an integer in \[1, "),
+    ("threshold", 1.5, r"'threshold' = 1.5: must be a number in \(0, 1\]"),
     ("threshold", 0, "threshold"),
     ("method", "sideways", "one of"),
     ("algo", "sarsa", "one of"),

@@ -39,7 +39,8 @@ FLOAT_FIELDS = {
     "finetune_threshold": (0.0, 1.0, True), "finetune_option_threshold": (0.0, 1.0, True),
     "finetune_plateau_gain": (0.0, 1.0, False), "finetune_side_cost_weight": (0.0, 100.0, False),
     "level_side_cost_weight": (0.0, 100.0, False),
-    "checkpoint_every": (0.0, 30 * 86_400.0, False),  # at most once a month
+    # finite: 1e9 and the like mean "only at level boundaries", infinity is a mistake
+    "checkpoint_every": (0.0, 1e12, False),
 }
 # fields that may be None (their default)
 NULLABLE = ("reset_pool",)

@@ -221,8 +221,12 @@ class TrainConfig:
             check_agent(config, self.num_envs, self.rollout_ticks)
         except (ValueError, TypeError) as err:
             raise ConfigError(short_message(str(err))) from None
+        tuning = normalize_agent(self.algo, self.finetune_agent)
         try:
-            make_config(self.algo, **(agent | normalize_agent(self.algo, self.finetune_agent)))
+            # a learning rate of 0 freezes what fine-tuning would move: allowed here alone
+            if tuning.get("learning_rate") == 0 and not isinstance(tuning["learning_rate"], bool):
+                tuning = tuning | {"learning_rate": agent.get("learning_rate", 1e-3)}
+            make_config(self.algo, **(agent | tuning))
         except (ValueError, TypeError) as err:
             raise ConfigError(short_message(f"config field 'finetune_agent': {err}")) from None
 
