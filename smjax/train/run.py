@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -197,6 +198,9 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
             task, given, identity | {"task_name": task, "config": cfg.to_dict()})
         trainer = HierarchyTrainer(engine, plans, slot_seeds, out_dir=out_dir,
                                    progress=progress, run_meta=identity, hp=hp, gamma=gamma)
+    if not engine.root_has_threshold and dist.is_writer():
+        warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(hierarchy.task).threshold),
+                      stacklevel=3)
     if resume:
         with TIMELINE.span("checkpoint restore"):
             trainer.restore(resume_from)
@@ -207,7 +211,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
         remedy = "fix the reward" if cause else "lower the learning rate"
         why = f"{cause}; " if cause else ""
         raise NonFiniteError(f"{err}; {why}{_kept(out_dir, remedy)}") from None
-    extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides}
+    extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides,
+             "success_unbounded": not engine.root_has_threshold}
     if points is None:
         return _finish(env.name, cfg, seeds, raw, extra, out_dir)
     out = {"points": [], "compile_seconds": raw["compile_seconds"]}
@@ -221,11 +226,20 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
     return out
 
 
+_UNBOUNDED = ("{}: the task's success is the episode return, not known to lie in [0, 1] "
+              "(success unbounded), so the threshold {:g} cannot tell when the task is "
+              "learned: the root level (and fine-tuning) spend their whole budget. Declare a "
+              "success in [0, 1] (declare(env, task, children, success=...)) to end them at "
+              "the threshold")
+
+
 def _finish(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
             out_dir) -> dict:
     """results.json (and curves) of a run, or of one point of a sweep."""
     config = cfg.to_dict() | extra
-    results = build_results(env_name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config)
+    unbounded = config.pop("success_unbounded", False)
+    results = build_results(env_name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config,
+                            success_unbounded=unbounded)
     if out_dir is not None and dist.is_writer():
         with TIMELINE.span("results.json, curves.csv, curves.png"):
             write_results(out_dir, results, raw["curves"])
