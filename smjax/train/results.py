@@ -77,6 +77,11 @@ def atomic_write_text(path: Path, text: str) -> None:
     fsync_dir(path.parent)
 
 
+class ResultsError(RuntimeError):
+    """Training finished (and is checkpointed) but its results could not be written; the
+    message says how to write them from the checkpoint."""
+
+
 def build_results(env_name: str, method: str, algo: str, seeds: list[int], threshold: float,
                   raw: dict, config: dict, success_unbounded: bool = False) -> dict:
     """results.json's content. ``success_unbounded``: the task's success is a raw return,
