@@ -39,6 +39,7 @@ def is_out_of_memory(err: BaseException) -> bool:
 def user_message(err: BaseException, batch: str | None = None) -> str | None:
     """The one line for a user error, else None (a bug)."""
     from smjax.train.checkpoint import CheckpointError
+    from smjax.train.results import ResultsError
 
     if is_out_of_memory(err):
         what = f" with {batch}" if batch else ""
@@ -48,6 +49,8 @@ def user_message(err: BaseException, batch: str | None = None) -> str | None:
         return f"disk full writing {err.filename or 'output'}; free space and --resume the run"
     if isinstance(err, CheckpointError):
         return _first_line(str(err))
+    if isinstance(err, ResultsError):  # says how to write the results from the checkpoint
+        return str(err)
     if isinstance(err, KeyError) and err.args:
         return str(err.args[0])  # str(KeyError) would quote the message
     if isinstance(err, USER_ERRORS):

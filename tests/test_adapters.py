@@ -227,3 +227,37 @@ def test_peer_scripts_smoke(tmp_path):
         assert summary["versions"]["rejax"] != "missing"
     finally:
         sys.path.remove(os.path.abspath(here))
+
+
+# ---- smjax's trainer on a gymnax task: flat needs no hierarchy; success may be unbounded --
+def _cartpole_run(method="flat", **kw):
+    from smjax.train import TrainConfig
+    from smjax.train.run import run
+
+    cfg = TrainConfig(method=method, num_envs=8, rollout_ticks=16, updates_per_chunk=2,
+                      max_episodes_per_level=40, success_window=8, eval_envs=8,
+                      checkpoint_every=0.0, threshold=0.8)
+    env, params = from_gymnax(*gymnax.make("CartPole-v1"))
+    return run((env, params), cfg, [0], progress=False, **kw)
+
+
+def test_flat_training_needs_no_declared_hierarchy():
+    res = _cartpole_run()
+    assert res["config"]["hierarchy_used"] == "primitives:flattened"
+    assert [lv["template"] for lv in res["levels"]] == ["task"]
+
+
+def test_an_unbounded_success_never_reaches_a_threshold():
+    """CartPole's success is its return (tens): compared with 0.8 it would "reach" at once.
+    The run says so, spends the level's budget, and reports no episodes to threshold."""
+    with pytest.warns(UserWarning, match=r"not known to lie in \[0, 1\]"):
+        res = _cartpole_run()
+    assert res["success_unbounded"] is True
+    assert res["levels"][0]["reached"] == [False]
+    assert res["episodes_to_threshold"] == [None]
+    assert res["levels"][0]["episodes"][0] >= 40  # the whole budget
+
+
+def test_the_top_down_method_still_needs_a_hierarchy():
+    with pytest.raises(ValueError, match="declares no hierarchies"):
+        _cartpole_run(method="top-down")

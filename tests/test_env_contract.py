@@ -312,3 +312,14 @@ def test_spaces_contain():
     assert bool(discrete.contains(jnp.array([0, 2])))
     assert not bool(discrete.contains(jnp.array([0, 3])))
     assert not bool(discrete.contains(jnp.array([0.5, 1.0])))
+
+
+@pytest.mark.slow  # each task's harness compiles its own programs: ~1-2 min on 2 cores
+@pytest.mark.parametrize("task", ["craft/get_wood", "craft/make_stick", "craft/get_gem",
+                                  "football/11v11_easy"])
+def test_registered_environments_pass_the_harness_with_its_defaults(task):
+    """What a user runs first: every argument left at its default (Fetch: see above)."""
+    env, params = smjax.make(task)
+    check_env(env, params)
+    for name in env.hierarchies():
+        check_hierarchy(env, params, name)

@@ -166,3 +166,33 @@ def test_checkpoint_formats_this_smjax_cannot_read_are_refused_by_name(tmp_path)
                         ({"format": CHECKPOINT_FORMAT + 1, "host": host}, "a newer")):
         with pytest.raises(ckpt.CheckpointError, match=f"written by {which} smjax"):
             ckpt.check_format(tmp_path, meta, 2, CHECKPOINT_FORMAT)
+
+
+@pytest.mark.parametrize("failing", ["build_results", "write_results"])
+def test_an_error_writing_results_loses_no_training(tmp_path, monkeypatch, failing):
+    """Training done, then results fail to build or write: the trained state is already
+    checkpointed, the error says how to get the results, and resuming writes them
+    without training again."""
+    from smjax.train.results import ResultsError
+
+    run_module = sys.modules["smjax.train.run"]  # (the package exports the function too)
+
+    cfg = TrainConfig(method="flat", num_envs=16, rollout_ticks=8, updates_per_chunk=2,
+                      max_episodes_per_level=60, success_window=16, eval_envs=16,
+                      checkpoint_every=0.0)
+    out = tmp_path / "run"
+
+    def broken(*args, **kwargs):
+        raise AttributeError("module 'smjax' has no attribute '__version__'")
+
+    monkeypatch.setattr(run_module, failing, broken)
+    with pytest.raises(ResultsError, match=r"--resume") as err:
+        run(make_keydoor(), cfg, [0], out, progress=False)
+    assert str(out) in str(err.value) and "__version__" in str(err.value)
+    assert not (out / "results.json").exists()
+    info = ckpt.load_meta(out)
+    assert info is not None and info["meta"]["trained"] is True
+    monkeypatch.undo()
+    res = run(make_keydoor(), cfg, [0], out, progress=False, resume=True)
+    saved = json.loads((out / "results.json").read_text())
+    assert saved["levels"] == res["levels"] and saved["final_success"] == res["final_success"]

@@ -59,8 +59,11 @@ class GymnaxEnvironment(Environment):
 
     ``reward`` is float32, ``terminated``/``truncated`` are bool scalars; the gymnax
     ``info`` dict is passed through (with gymnax 0.0.x's combined flag kept as
-    ``info["gymnax_done"]``).
+    ``info["gymnax_done"]``). The task's success is the episode return, on no known scale
+    (``success_unbounded``): smjax's trainer ends no root level at a threshold on it.
     """
+
+    success_unbounded = True
 
     def __init__(self, gymnax_env: Any, gymnax_params: Any):
         for method in ("reset_env", "step_env", "action_space", "observation_space"):

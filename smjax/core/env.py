@@ -61,6 +61,10 @@ class Environment(Generic[TEnvState, TEnvParams]):
     #: lies in [0, 1]. Lets the trainer stop a level's gate as soon as its outcome is
     #: certain; leave False where returns can leave [0, 1] (e.g. goal differences).
     success_in_unit_interval: bool = False
+    #: That success has no scale a threshold could mean (an adapted gymnax environment's
+    #: return: CartPole's is tens): a root level never ends at a threshold but spends its
+    #: budget, unless the hierarchy declares a success of its own.
+    success_unbounded: bool = False
     #: ``initial_state``/``reset_env`` ignore their key (every episode starts from the same
     #: state): ``step`` then passes its key to ``step_env`` unsplit (see the module docstring).
     reset_ignores_key: bool = False

@@ -150,6 +150,12 @@ class Engine:
         declares its success (documented to be a float in [0, 1] or a bool)."""
         return bool(self.env.success_in_unit_interval or self.h.success is not None)
 
+    @property
+    def root_has_threshold(self) -> bool:
+        """The root's success can end a level at a threshold: not a return on no known scale
+        (``Environment.success_unbounded``), or the hierarchy declares its success."""
+        return bool(not self.env.success_unbounded or self.h.success is not None)
+
     # ---- state -----------------------------------------------------------------
     def init_learner(self, keys: jax.Array):
         """Fresh learner states for each seed (leading axis S).

@@ -128,7 +128,8 @@ class FinetunePhase:
                                       env_steps, running, s])
             if self._tb is not None and running is not None:
                 self._tb.add_scalar(f"seed_{seed}/finetune/task_success", running, env_steps)
-        return rec.task_running is not None and rec.task_running >= cfg.finetune_threshold
+        return (rec.task_running is not None and rec.task_running >= cfg.finetune_threshold
+                and self.engine.root_has_threshold)  # a raw return is no success rate
 
     def _phase_spent(self, s: int) -> bool:
         return self.state.finetune[s].episodes >= self.cfg.finetune_max_episodes

@@ -38,9 +38,15 @@ class LevelPhase:
                     self._tb.add_scalar(f"{tag}/running_success", running, env_steps)
                     self._tb.add_scalar(f"{tag}/episodes", episodes, env_steps)
             if (c.running is not None and c.running >= cfg.threshold
-                    and not self._finetuning(s)):
+                    and not self._finetuning(s) and self._has_threshold(plan.option)):
                 candidates.append(s)
         return candidates, task_candidates
+
+    def _has_threshold(self, option: int) -> bool:
+        """A level can end at its threshold: an option's success lies in [0, 1]; the root's
+        (option 0) unless it is a return on no known scale (CartPole's, tens, would pass
+        0.8 at once): such a root level spends its whole budget instead."""
+        return option != 0 or self.engine.root_has_threshold
 
     def _budget_spent(self, cfg: TrainConfig, s: int) -> bool:
         c = self.state.level[s]

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from smjax.options.hierarchy import Hierarchy
+from smjax.options.hierarchy import Hierarchy, declare
 from smjax.train.config import ConfigError, TrainConfig
 
 
@@ -21,7 +21,10 @@ def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
     the caller, named ``declared:<task>``), else the named one, else the environment's
     default (the first of its catalogue, ``env.hierarchies()``). The flat method trains
     that hierarchy's flattening (``Hierarchy.flattened``: one level over its leaves),
-    named ``<name>:flattened``."""
+    named ``<name>:flattened``. An environment that declares none trains flat over its
+    primitive actions alone (``primitives:flattened``): flat needs no hierarchy."""
+    if given is None and cfg.method == "flat" and cfg.hierarchy is None and not env.hierarchies():
+        return "primitives:flattened", declare(env, "task", {"task": ["primitives"]})
     if given is not None:
         if not isinstance(given, Hierarchy):
             raise ConfigError(f"hierarchy must be a name or a smjax.options.Hierarchy (e.g. from "

@@ -1,7 +1,8 @@
 """The training progress bar: levels finished by all seeds, and where each seed stands.
 
-Seeds train their levels at their own pace, so one bar counts (seed, level) pairs
-finished out of seeds x levels; its postfix shows how many seeds are at each level, the
+Seeds train their levels at their own pace, so one bar counts (seed, stage) pairs finished
+out of seeds x stages (a stage: one level, or fine-tuning); its postfix shows how many
+seeds are at each level (``seeds_at=L1:1 L2:1``, ``FT``: fine-tuning), the
 mean running success of the levels in progress, the mean episodes (or env steps, where a
 level has a step budget) spent in them, the last gate success, and env steps per second.
 """
@@ -18,7 +19,8 @@ class Progress:
         seeds, levels = len(trainer.seeds), len(trainer.plans)
         stages = trainer.num_stages  # the levels, and fine-tuning where it runs
         done = int(sum(trainer.state.stage))
-        what = f"{levels} level{'s' * (levels > 1)}" + (" + fine-tune" if stages > levels else "")
+        what = f"{levels} level{'s' * (levels > 1)}"
+        what = f"({what} + fine-tune)" if stages > levels else what
         self.bar = tqdm(total=seeds * stages, initial=done, unit="stage", leave=True,
                         desc=f"{seeds} seed{'s' * (seeds > 1)} x {what}")
 
@@ -30,7 +32,8 @@ class Progress:
         self.bar.n = int(sum(st.stage))
         at = [f"L{trainer._plan(s).level}" if not trainer._finetuning(s) else "FT"
               for s in training]
-        extra = {"at": " ".join(f"{a}x{at.count(a)}" for a in sorted(set(at)))} if at else {}
+        order = sorted(set(at), key=lambda a: (a == "FT", a))  # levels, then fine-tuning
+        extra = {"seeds_at": " ".join(f"{a}:{at.count(a)}" for a in order)} if at else {}
         levels = [s for s in training if not trainer._finetuning(s)]
         runs = [st.level[s].running for s in levels if st.level[s].running is not None]
         gates = [st.level[s].gate_success for s in levels if st.level[s].gate_success is not None]

@@ -77,8 +77,15 @@ def atomic_write_text(path: Path, text: str) -> None:
     fsync_dir(path.parent)
 
 
+class ResultsError(RuntimeError):
+    """Training finished (and is checkpointed) but its results could not be written; the
+    message says how to write them from the checkpoint."""
+
+
 def build_results(env_name: str, method: str, algo: str, seeds: list[int], threshold: float,
-                  raw: dict, config: dict) -> dict:
+                  raw: dict, config: dict, success_unbounded: bool = False) -> dict:
+    """results.json's content. ``success_unbounded``: the task's success is a raw return,
+    so no root level or fine-tuning ended at a threshold."""
     env, task = env_name.split("/", 1)
     levels = raw["levels"]
     per_seed_eps, per_seed_steps = [], []
@@ -95,6 +102,7 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
         "algo": algo,
         "seeds": list(seeds),
         "threshold": threshold,
+        "success_unbounded": bool(success_unbounded),
         "episodes_to_threshold": per_seed_eps,
         "env_steps_to_threshold": per_seed_steps,
         "final_success": [float(x) for x in final["success"]],

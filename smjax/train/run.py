@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ from smjax.train.plans import (declared_identity, plan_levels, reachable_root_th
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.reward_probe import nonfinite_reward
-from smjax.train.results import build_results, write_results, write_sweep
+from smjax.train.results import ResultsError, build_results, write_results, write_sweep
 from smjax.train.sweep import normalize_sweep, point_config, point_raw, slot_layout, sweep_points
 
 
@@ -197,6 +198,9 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
             task, given, identity | {"task_name": task, "config": cfg.to_dict()})
         trainer = HierarchyTrainer(engine, plans, slot_seeds, out_dir=out_dir,
                                    progress=progress, run_meta=identity, hp=hp, gamma=gamma)
+    if not engine.root_has_threshold and dist.is_writer():
+        warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(hierarchy.task).threshold),
+                      stacklevel=3)
     if resume:
         with TIMELINE.span("checkpoint restore"):
             trainer.restore(resume_from)
@@ -207,25 +211,51 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
         remedy = "fix the reward" if cause else "lower the learning rate"
         why = f"{cause}; " if cause else ""
         raise NonFiniteError(f"{err}; {why}{_kept(out_dir, remedy)}") from None
-    extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides}
+    extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides,
+             "success_unbounded": not engine.root_has_threshold}
+    try:
+        return _results(env.name, cfg, seeds, raw, extra, out_dir, points, len(slot_seeds))
+    except Exception as err:  # noqa: BLE001 - any failure here must not lose the training
+        if out_dir is None:
+            raise
+        raise ResultsError(
+            f"training finished and is checkpointed in {ckpt.checkpoint_dir(out_dir)}; "
+            f"resume it (smjax train ... --resume {out_dir}, or run(..., resume=True)) to "
+            f"write its results without training again. Writing them failed: "
+            f"{type(err).__name__}: {err}") from err
+
+
+def _results(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
+             out_dir, points: list | None, num_slots: int) -> dict:
+    """The run's results (written to ``out_dir``), or each sweep point's and sweep.json.
+    The final checkpoint (``trained``) was written before: a failure here loses nothing."""
     if points is None:
-        return _finish(env.name, cfg, seeds, raw, extra, out_dir)
+        return _finish(env_name, cfg, seeds, raw, extra, out_dir)
     out = {"points": [], "compile_seconds": raw["compile_seconds"]}
     for p, point in enumerate(points):
-        part = point_raw(raw, p, len(seeds), len(slot_seeds))
+        part = point_raw(raw, p, len(seeds), num_slots)
         where = None if out_dir is None else Path(out_dir) / f"point-{p}"
-        results = _finish(env.name, point_config(cfg, point), seeds, part, extra, where)
+        results = _finish(env_name, point_config(cfg, point), seeds, part, extra, where)
         out["points"].append({"overrides": point, "results": results})
     if out_dir is not None and dist.is_writer():
         write_sweep(out_dir, out)
     return out
 
 
+_UNBOUNDED = ("{}: the task's success is the episode return, not known to lie in [0, 1] "
+              "(success unbounded), so the threshold {:g} cannot tell when the task is "
+              "learned: the root level (and fine-tuning) spend their whole budget. Declare a "
+              "success in [0, 1] (declare(env, task, children, success=...)) to end them at "
+              "the threshold")
+
+
 def _finish(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
             out_dir) -> dict:
     """results.json (and curves) of a run, or of one point of a sweep."""
     config = cfg.to_dict() | extra
-    results = build_results(env_name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config)
+    unbounded = config.pop("success_unbounded", False)
+    results = build_results(env_name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config,
+                            success_unbounded=unbounded)
     if out_dir is not None and dist.is_writer():
         with TIMELINE.span("results.json, curves.csv, curves.png"):
             write_results(out_dir, results, raw["curves"])

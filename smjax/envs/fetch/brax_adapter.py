@@ -6,15 +6,41 @@
 Brax's trainers expect). ``State.pipeline_state`` is the ``FetchState``; ``info`` carries
 ``rng``, ``score`` and ``is_success``, ``metrics`` the score and success. ``done`` is 0:
 Brax's EpisodeWrapper truncates at ``episode_length`` (pass 50 N for the reference).
+
+Brax 0.14's trainers (``brax.training.agents.ppo.train``, SAC, APG) call
+``jax.device_put_replicated``, which JAX 0.10 removed. Importing this module defines it
+where it is missing (:func:`device_put_replicated`: JAX's documented drop-in, a stack
+over the devices placed with one shard per device), so Brax's PPO trains on this
+environment with the versions ``pip install -e ".[peers]"`` installs. Where JAX has its
+own, nothing changes.
 """
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from brax.envs.base import Env, State
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from smjax.envs.fetch.env import FetchEnv
 from smjax.envs.fetch.types import FetchConfig
+
+
+def device_put_replicated(x, devices):
+    """``x``'s leaves stacked once per device, one copy on each: what JAX < 0.10's
+    ``jax.device_put_replicated`` returned (the input of a ``pmap`` over ``devices``)."""
+    sharding = NamedSharding(Mesh(np.array(devices), ("devices",)), PartitionSpec("devices"))
+    return jax.tree.map(
+        lambda v: jax.device_put(jnp.stack([jnp.asarray(v)] * len(devices)), sharding), x)
+
+
+def _install_device_put_replicated() -> None:
+    """Brax's trainers need it; JAX 0.10's ``jax`` module answers with an AttributeError."""
+    if not hasattr(jax, "device_put_replicated"):
+        jax.device_put_replicated = device_put_replicated
+
+
+_install_device_put_replicated()
 
 
 class BraxFetchEnv(Env):
