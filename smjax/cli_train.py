@@ -116,12 +116,16 @@ def _check_port_free(address: str, port: int) -> None:
             sock.close()
 
 
+MAX_COORDINATOR_TIMEOUT = 86_400  # a day: JAX takes the timeout as a whole number of seconds
+
+
 def initialize_distributed(args) -> None:
     """Join the multi-process run the flags / environment describe (nothing for one process)."""
     from smjax.train.distributed import initialize, resolve
 
-    if not args.coordinator_timeout > 0:
-        raise UsageError(f"--coordinator-timeout must be > 0 seconds, got {args.coordinator_timeout}")
+    if not 0 < args.coordinator_timeout <= MAX_COORDINATOR_TIMEOUT:  # nan and inf too
+        raise UsageError(f"--coordinator-timeout must be in (0, {MAX_COORDINATOR_TIMEOUT}] "
+                         f"seconds, got {args.coordinator_timeout}")
     ids = None
     if args.local_device_ids:
         try:

@@ -48,3 +48,60 @@ def test_the_memory_estimate_counts_the_pool_and_the_windows(tmp_path, capsys, m
     code, err = _cli(_train(tmp_path, "--num-envs", "8", *sets), capsys)
     assert code == 2 and "batch too large" in err and f"lower {setting}" in err, err
     assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["train", "craft/make_stick", "--coordinator-timeout", "inf"], "--coordinator-timeout"),
+    (["train", "craft/make_stick", "--coordinator-timeout", "nan"], "--coordinator-timeout"),
+    (["bench", "craft/make_stick", "--steps", "3000000000"], "bench steps"),
+    (["bench", "craft/make_stick", "--repeats", "0"], "bench repeats")])
+def test_numbers_past_their_range_are_usage_errors(tmp_path, capsys, argv, needle):
+    code, err = _cli(argv + (["--out", str(tmp_path / "r")] if argv[0] == "train" else []), capsys)
+    assert code == 2 and needle in err and len(err.strip().splitlines()) == 1, err
+
+
+CURVES = "seed,level,template,episodes,env_steps,avg_return\n0,1,root,10,80,0.5\n"
+
+
+@pytest.mark.parametrize("results, field", [
+    ("[1, 2, 3]", "not a smjax results file"), ('{"finetune": [1]}', "'finetune'"),
+    ('{"final_success": "high"}', "'final_success'"), ('{"method": 7}', "'method'"),
+    ('{"finetune": {"final_success_before": [true]}}', "'finetune.final_success_before'")])
+def test_plot_refuses_a_damaged_results_json(tmp_path, capsys, results, field):
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "curves.csv").write_text(CURVES)
+    (tmp_path / "run" / "results.json").write_text(results)
+    code, err = _cli(["plot", str(tmp_path / "run"), "--out", str(tmp_path / "p.png")], capsys)
+    assert code == 2 and "results.json" in err and field in err, err
+    assert not (tmp_path / "p.png").exists()
+
+
+def _good_meta() -> dict:
+    host = {"stage": [0], "started": [False], "levels": [], "curves": [], "finetune": {},
+            "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": 0}
+    run = {"task": "craft/make_stick", "seeds": [0], "env_overrides": {}}
+    return {"run": run, "host": host, "settings": {}, "format": 5}
+
+
+@pytest.mark.parametrize("damage, field", [
+    (lambda m: m["run"].__setitem__("seeds", "x"), "run.seeds"),
+    (lambda m: m["run"].__setitem__("seeds", [True]), "run.seeds"),
+    (lambda m: m["run"].pop("seeds"), "run.seeds"),
+    (lambda m: m["run"].__setitem__("env_overrides", []), "run.env_overrides"),
+    (lambda m: m["host"].__setitem__("curves", "x"), "host.curves"),
+    (lambda m: m["host"].__setitem__("curves", [1, 2]), "host.curves"),
+    (lambda m: m.__setitem__("settings", 5), "settings")])
+def test_a_damaged_but_valid_json_checkpoint_index_is_refused(tmp_path, capsys, damage, field):
+    """latest.json and the step's manifest agree (a damage written with them), so only the
+    fields' types show it."""
+    import numpy as np
+
+    from smjax.train import checkpoint as ckpt
+
+    meta = _good_meta()
+    damage(meta)
+    ckpt.save_checkpoint(tmp_path / "r", 1, {"a": np.zeros(3, np.float32)}, meta)
+    code, err = _cli(["train", "craft/make_stick", "--quiet", "--resume", str(tmp_path / "r")],
+                     capsys)
+    assert code == 2 and ckpt.LATEST in err and f"field {field!r}" in err, err
+    assert len(err.strip().splitlines()) == 1

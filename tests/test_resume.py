@@ -135,7 +135,7 @@ def test_a_checkpoint_from_before_a_new_config_field_resumes_unless_it_differs(m
     cfg = TrainConfig(**CFG)
     identity = run_identity("keydoor", cfg, [0, 1], {})
     old = {k: v for k, v in identity.items() if k != "level_side_cost_weight"}
-    monkeypatch.setattr(ckpt, "shared_meta", lambda out: {"meta": {"run": old}})
+    monkeypatch.setattr(ckpt, "shared_meta", lambda out, step=None: {"meta": {"run": old}})
     assert check_resumable("some/dir", identity)
     changed = run_identity("keydoor", cfg.replace(level_side_cost_weight=1.0), [0, 1], {})
     with pytest.raises(ConfigError, match="level_side_cost_weight: checkpoint 0.0 vs now 1.0"):
@@ -143,7 +143,7 @@ def test_a_checkpoint_from_before_a_new_config_field_resumes_unless_it_differs(m
     # a field whose default changed what runs do (fine-tuning turns that keep their
     # episodes): a checkpoint without it ran the old way, so it resumes only that way
     old = {k: v for k, v in identity.items() if k != "finetune_continue_episodes"}
-    monkeypatch.setattr(ckpt, "shared_meta", lambda out: {"meta": {"run": old}})
+    monkeypatch.setattr(ckpt, "shared_meta", lambda out, step=None: {"meta": {"run": old}})
     with pytest.raises(ConfigError, match="finetune_continue_episodes: checkpoint False vs now True"):
         check_resumable("some/dir", identity)
     legacy = run_identity("keydoor", cfg.replace(finetune_continue_episodes=False), [0, 1], {})
