@@ -105,3 +105,15 @@ def test_a_damaged_but_valid_json_checkpoint_index_is_refused(tmp_path, capsys, 
                      capsys)
     assert code == 2 and ckpt.LATEST in err and f"field {field!r}" in err, err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_map_seed_without_a_fixed_map_is_refused(tmp_path, capsys):
+    """Every episode draws its own map unless the map is fixed: the seed would be ignored."""
+    import smjax
+
+    code, err = _cli(_train(tmp_path, "--env", "map_seed=3"), capsys)
+    assert code == 2 and "map_seed=3" in err and "add --fixed-map" in err, err
+    with pytest.raises(ValueError, match="add --fixed-map"):
+        smjax.make("craft/get_gem", map_seed=3)
+    a, _ = smjax.make("craft/get_gem", fixed_map=True, map_seed=3)  # with the flag: accepted
+    assert a is not None
