@@ -117,3 +117,13 @@ def test_a_map_seed_without_a_fixed_map_is_refused(tmp_path, capsys):
         smjax.make("craft/get_gem", map_seed=3)
     a, _ = smjax.make("craft/get_gem", fixed_map=True, map_seed=3)  # with the flag: accepted
     assert a is not None
+
+
+@pytest.mark.parametrize("argv", [["train"], ["train", "craft/make_stick", "--seeds", "x"],
+                                  ["nosuch"], ["bench"], ["train", "craft/make_stick", "--bogus"]])
+def test_argparse_errors_are_two_lines(capsys, argv):
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2 and len(err) == 2, err
+    assert "error:" in err[0] and err[1].endswith("--help`)")
