@@ -50,9 +50,9 @@ def user_message(err: BaseException, batch: str | None = None) -> str | None:
     from smjax.train.checkpoint import CheckpointError
 
     if is_out_of_memory(err):
-        what = f" with {batch}" if batch else ""
-        return (f"out of memory{what} ({_first_line(str(err))[:200]}); lower --num-envs or "
-                f"--seeds")
+        what, advice = (f" with {batch}", "lower one of these") if batch else (
+            "", "lower --num-envs or --seeds")
+        return f"out of memory{what} ({_first_line(str(err))[:200]}); {advice}"
     if isinstance(err, OSError) and err.errno == errno.ENOSPC:
         return f"disk full writing {err.filename or 'output'}; free space and --resume the run"
     if isinstance(err, CheckpointError):

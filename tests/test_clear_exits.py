@@ -127,3 +127,15 @@ def test_argparse_errors_are_two_lines(capsys, argv):
     err = capsys.readouterr().err.strip().splitlines()
     assert stop.value.code == 2 and len(err) == 2, err
     assert "error:" in err[0] and err[1].endswith("--help`)")
+
+
+def test_an_out_of_memory_message_names_the_sizes_that_were_set():
+    from smjax.cli_train import batch_description
+    from smjax.train import TrainConfig
+
+    cfg = TrainConfig(num_envs=8, reset_pool=500_000, agent={"hidden_sizes": [4096, 4096]})
+    batch = batch_description(cfg, 2)
+    assert batch == "2 seed(s) x num_envs 8, reset_pool 500000, hidden_sizes '[4096, 4096]'"
+    oom = jax.errors.JaxRuntimeError("INTERNAL: Out of memory allocating 36000000000 bytes.")
+    assert user_message(oom, batch).endswith("; lower one of these")
+    assert batch_description(TrainConfig(num_envs=8), 1) == "1 seed(s) x num_envs 8"
