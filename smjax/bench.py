@@ -13,6 +13,10 @@ import jax
 import jax.numpy as jnp
 
 from smjax.core.registry import make
+from smjax.train.bounds import MAX_ENVS
+
+MAX_STEPS = 10_000_000  # the scan's length is an int32, and each step is a full batch
+MAX_REPEATS = 1000
 
 
 def make_rollout(env, params, num_envs: int, steps: int):
@@ -39,8 +43,10 @@ def make_rollout(env, params, num_envs: int, steps: int):
 
 
 def bench(task: str, num_envs: int, steps: int, repeats: int = 3, **overrides) -> dict:
-    if num_envs < 1 or steps < 1 or repeats < 1:
-        raise ValueError(f"num_envs, steps and repeats must be >= 1, got {num_envs}, {steps}, {repeats}")
+    for name, value, high in (("num_envs", num_envs, MAX_ENVS), ("steps", steps, MAX_STEPS),
+                              ("repeats", repeats, MAX_REPEATS)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= high:
+            raise ValueError(f"bench {name} must be an integer in [1, {high}], got {value!r}")
     env, params = make(task, **overrides)
     rollout = make_rollout(env, params, num_envs, steps)
     key = jax.random.PRNGKey(0)

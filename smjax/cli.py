@@ -267,9 +267,17 @@ def _run_command(command, args) -> int:
         return 1
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a short error: the mistake and where help is, not the whole usage
+    (16 lines for ``train``, which hide the one that matters). Subcommands inherit it."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n(see `{self.prog} --help`)\n")
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="smjax", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = _Parser(prog="smjax", description=DESCRIPTION,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_train(sub)
     _add_bench(sub)

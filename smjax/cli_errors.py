@@ -8,6 +8,7 @@ line, exit code 1, and the hint to rerun with ``--debug``.
 from __future__ import annotations
 
 import errno
+import re
 
 USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, KeyError, TypeError,
                                                 FileNotFoundError, FileExistsError,
@@ -24,16 +25,24 @@ def _first_line(text: str) -> str:
     return lines[0] if lines else ""
 
 
+# XLA's words for an allocation that failed: a device's RESOURCE_EXHAUSTED (with
+# "memory"), and the CPU client's INTERNAL "Out of memory allocating N bytes." or
+# "Failed to allocate ..." (a host out of memory is not RESOURCE_EXHAUSTED there)
+_OOM_WORDS = re.compile(r"out of memory|failed to allocate (memory|buffer|\d)", re.IGNORECASE)
+
+
 def is_out_of_memory(err: BaseException) -> bool:
-    """XLA's out-of-memory error (RESOURCE_EXHAUSTED ... memory), or Python's. (A full disk
-    is RESOURCE_EXHAUSTED too, in the I/O library's words; it is not this.)"""
+    """XLA's out-of-memory error on a device or the CPU, or Python's. (A full disk is
+    RESOURCE_EXHAUSTED too, in the I/O library's words; it is not this.)"""
     from smjax.train.checkpoint import CheckpointError
 
     if isinstance(err, MemoryError):
         return True
+    if isinstance(err, CheckpointError):
+        return False
     text = str(err)
-    return (not isinstance(err, CheckpointError) and "RESOURCE_EXHAUSTED" in text
-            and "memory" in text.lower())
+    return ("RESOURCE_EXHAUSTED" in text and "memory" in text.lower()) or bool(
+        _OOM_WORDS.search(text))
 
 
 def user_message(err: BaseException, batch: str | None = None) -> str | None:
@@ -42,9 +51,9 @@ def user_message(err: BaseException, batch: str | None = None) -> str | None:
     from smjax.train.results import ResultsError
 
     if is_out_of_memory(err):
-        what = f" with {batch}" if batch else ""
-        return (f"out of memory{what} ({_first_line(str(err))[:200]}); lower --num-envs or "
-                f"--seeds")
+        what, advice = (f" with {batch}", "lower one of these") if batch else (
+            "", "lower --num-envs or --seeds")
+        return f"out of memory{what} ({_first_line(str(err))[:200]}); {advice}"
     if isinstance(err, OSError) and err.errno == errno.ENOSPC:
         return f"disk full writing {err.filename or 'output'}; free space and --resume the run"
     if isinstance(err, CheckpointError):

@@ -116,12 +116,16 @@ def _check_port_free(address: str, port: int) -> None:
             sock.close()
 
 
+MAX_COORDINATOR_TIMEOUT = 86_400  # a day: JAX takes the timeout as a whole number of seconds
+
+
 def initialize_distributed(args) -> None:
     """Join the multi-process run the flags / environment describe (nothing for one process)."""
     from smjax.train.distributed import initialize, resolve
 
-    if not args.coordinator_timeout > 0:
-        raise UsageError(f"--coordinator-timeout must be > 0 seconds, got {args.coordinator_timeout}")
+    if not 0 < args.coordinator_timeout <= MAX_COORDINATOR_TIMEOUT:  # nan and inf too
+        raise UsageError(f"--coordinator-timeout must be in (0, {MAX_COORDINATOR_TIMEOUT}] "
+                         f"seconds, got {args.coordinator_timeout}")
     ids = None
     if args.local_device_ids:
         try:
@@ -213,7 +217,7 @@ def cmd_train(args) -> int:
     safe_task = re.sub(r"[^\w.-]", "_", args.task)  # MODULE:ENV/TASK holds ':' and '/'
     out = args.resume or args.out or f"runs/{safe_task}_{cfg.method}"
     slots = len(seeds) * _num_points(sweep)
-    args._batch = f"{slots} seed(s) x num_envs {cfg.num_envs}"  # for an out-of-memory message
+    args._batch = batch_description(cfg, slots)  # for an out-of-memory message
     args._out = out  # for the resume command an interruption prints
     results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
                   resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep,
@@ -231,6 +235,19 @@ def cmd_train(args) -> int:
         print(f"wrote {Path(out) / 'sweep.json'}, point-<k>/results.json, curves.csv, curves.png")
     sys.stdout.flush()
     return 0
+
+
+def batch_description(cfg, slots: int) -> str:
+    """The settings that size a run's memory, as an out-of-memory message names them: the
+    batch, and the pool, window and layer sizes where they were set."""
+    parts = [f"{slots} seed(s) x num_envs {cfg.num_envs}"]
+    if cfg.reset_pool is not None:
+        parts.append(f"reset_pool {cfg.reset_pool}")
+    if cfg.window_slots != type(cfg)().success_window:
+        parts.append(f"success_window {cfg.window_slots}")
+    if "hidden_sizes" in cfg.agent:
+        parts.append(f"hidden_sizes {short_text(str(cfg.agent['hidden_sizes']), 40)}")
+    return ", ".join(parts)
 
 
 def _write_profile(out) -> None:

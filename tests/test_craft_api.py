@@ -75,6 +75,8 @@ def ascii_maps(draw):
     cells = draw(st.lists(st.sampled_from(INTERIOR_GLYPHS), min_size=100, max_size=100))
     agent = draw(st.integers(0, 99))
     cells[agent] = "@"
+    # make_axe's raw materials, without which from_ascii refuses the map as unsolvable
+    cells[(agent + 1) % 100], cells[(agent + 2) % 100] = "w", "i"
     rows = ["#" * N] + ["#" + "".join(cells[r * 10:(r + 1) * 10]) + "#" for r in range(10)]
     return "\n".join(rows + ["#" * N])
 

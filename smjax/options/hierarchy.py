@@ -74,6 +74,9 @@ class Hierarchy:
             raise HierarchyError(
                 f"task {self.task!r} is also a template name; the root option needs its own name"
             )
+        if self.task in self.primitive_names or self.task == ALL_PRIMITIVES:
+            raise HierarchyError(f"task {self.task!r} is also a primitive action's name; the root "
+                                 f"option needs its own name")
         if self.success is not None and not callable(self.success):
             raise HierarchyError(
                 f"success must be a function success(state, params) -> float in [0, 1] or "
@@ -97,6 +100,11 @@ class Hierarchy:
         order, depth = self._walk()
         object.__setattr__(self, "option_names", tuple(order))
         object.__setattr__(self, "depth_of", depth)
+        orphans = [name for name in self.children if name not in depth]
+        if orphans:  # its children would never be chosen: a mistake in the declaration
+            raise HierarchyError(f"option(s) {sorted(orphans)} have children declared but are "
+                                 f"never reachable from the task {self.task!r}; list them as a "
+                                 f"child of an option that is, or drop them")
         for name in order[1:]:
             tpl = self.templates[name]
             if name in self.policies:  # it decides by its script: nothing else is needed
@@ -302,7 +310,7 @@ def declare(env, task: str, children: Mapping[str, Sequence[str]], *,
             if bad:
                 raise HierarchyError(f"template registered as {bad[0]!r} is named "
                                      f"{templates[bad[0]].name!r}")
-    return Hierarchy(
+    hierarchy = Hierarchy(
         task=task,
         children=dict(children),
         templates=own,
@@ -311,6 +319,20 @@ def declare(env, task: str, children: Mapping[str, Sequence[str]], *,
         policies=policies,
         success_ceiling=success_ceiling,
     )
+    _check_own_templates_used(hierarchy, templates)
+    return hierarchy
+
+
+def _check_own_templates_used(h: Hierarchy, templates) -> None:
+    """Refuse a template the caller declared that the task never reaches (the environment's
+    own templates may go unused: a hierarchy picks among them)."""
+    if templates is None:
+        return
+    names = [t.name for t in (templates.values() if isinstance(templates, Mapping) else templates)]
+    unused = [n for n in names if n not in h.depth_of]
+    if unused:
+        raise HierarchyError(f"template(s) {sorted(unused)} are declared but never reachable from "
+                             f"the task {h.task!r}; list them as children or drop them")
 
 
 def check_success(h: Hierarchy, env, env_params) -> None:

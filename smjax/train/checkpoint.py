@@ -252,30 +252,41 @@ def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> 
     return target
 
 
-def load_meta(out_dir: str | Path, step: str | None = None) -> dict | None:
+def load_meta(out_dir: str | Path, step: str | None = None, complete: bool = False) -> dict | None:
     """``latest.json``'s content, or ``step``'s (a step name: its manifest), or, without
     ``latest.json``, the newest step's with a readable manifest (None when there is
-    none); a damaged one is refused in one line naming the file."""
-    root = checkpoint_dir(out_dir)
+    none); a damaged one (a field of the wrong type; with ``complete``, also a field a
+    resume needs that is missing) is refused in one line naming the file and field."""
+    info, source = _find_meta(checkpoint_dir(out_dir), step)
+    problem = None if info is None else mf.check_meta(info["meta"], complete)
+    if problem is not None:
+        raise CheckpointError(f"{source} is damaged: its field {problem!r} is missing or of the "
+                              f"wrong type; resume another step with --resume-from STEP, or start "
+                              f"again with --overwrite")
+    return info
+
+
+def _find_meta(root: Path, step: str | None) -> tuple[dict | None, Path]:
+    """``load_meta``'s info before its fields are checked, and the file it came from."""
     latest = root / LATEST
     if step is not None:
-        return _from_manifest(root, step)
+        info = _from_manifest(root, step)
+        return info, root / info["path"] / mf.MANIFEST
     if not latest.exists():
         for found in mf.steps_newest_first(root):
             info = _step_info(found)
             if info is not None:
-                return info
-        return None
+                return info, found / mf.MANIFEST
+        return None, latest
     fix = "restore it from a backup, resume a step with --resume-from STEP, or start again with --overwrite"
     try:
         info = json.loads(latest.read_text())
     except (OSError, ValueError) as err:
         raise CheckpointError(f"{latest} is unreadable or not valid JSON ({_first_line(err)}); "
                               f"{fix}") from None
+    # (the meta's own fields are checked by ``mf.check_meta``, which names the bad one)
     ok = (isinstance(info, dict) and isinstance(info.get("path"), str)
-          and isinstance(info.get("meta"), dict) and isinstance(info["meta"].get("run"), dict)
-          and isinstance(info["meta"].get("host"), dict)
-          and isinstance(info["meta"]["run"].get("seeds", []), list))
+          and isinstance(info.get("meta"), dict))
     if not ok:
         raise CheckpointError(f"{latest} is not a smjax checkpoint index (missing path/meta); {fix}")
     if not (root / info["path"]).is_dir() or "/" in info["path"]:
@@ -284,7 +295,7 @@ def load_meta(out_dir: str | Path, step: str | None = None) -> dict | None:
     if manifest is not None and manifest["meta"] != info["meta"]:
         raise CheckpointError(f"{latest} does not match the manifest of {info['path']} (it was "
                               f"edited or damaged); {fix}")
-    return info
+    return info, latest
 
 
 def _step_info(step_dir: Path) -> dict | None:
@@ -319,8 +330,8 @@ def verify_step(out_dir: str | Path, info: dict) -> None:
 def shared_meta(out_dir: str | Path, step: str | None = None) -> dict | None:
     """``load_meta`` as process 0 sees it, on every process (collective when several)."""
     if not dist.is_multiprocess():
-        return load_meta(out_dir, step)
-    return dist.broadcast_json(load_meta(out_dir, step) if dist.is_writer() else None)
+        return load_meta(out_dir, step, complete=True)
+    return dist.broadcast_json(load_meta(out_dir, step, complete=True) if dist.is_writer() else None)
 
 
 def check_format(out_dir: str | Path, meta: dict, oldest: int, newest: int) -> int:

@@ -98,3 +98,40 @@ def check_host(host: dict, num_slots: int, num_stages: int) -> str | None:
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
             return f"its counter {name} = {value!r} is not a count"
     return None
+
+
+_NUMBER = (int, float)
+# the fields of a checkpoint's meta that a resume reads, with their types
+META_FIELDS = {"run": dict, "host": dict}
+RUN_FIELDS = {"task": str, "seeds": list, "env_overrides": dict}
+HOST_FIELDS = {"stage": list, "started": list, "levels": list, "curves": list, "finetune": dict,
+               "compile_seconds": _NUMBER, "wall_seconds": _NUMBER, "chunks": int}
+OPTIONAL = {"settings": dict, "format": int}
+
+
+def check_meta(meta, complete: bool = True) -> str | None:
+    """Which field of a checkpoint's meta has the wrong type, or (``complete``: every field
+    a resume reads is needed) is missing; None: none. JSON that parses can still hold a
+    string where the seeds' list belongs; the resume would fail on it deep inside, naming
+    only the key."""
+    if not isinstance(meta, dict):
+        return "meta"
+    for where, value, fields, required in (
+            ("", meta, META_FIELDS, True), ("", meta, OPTIONAL, False),
+            ("run.", meta.get("run"), RUN_FIELDS, complete),
+            ("host.", meta.get("host"), HOST_FIELDS, complete)):
+        for name, kind in fields.items():
+            if not isinstance(value, dict):
+                return where.rstrip(".")
+            if name not in value and not required:
+                continue
+            if isinstance(value.get(name), bool) or not isinstance(value.get(name), kind):
+                return f"{where}{name}"
+    seeds = meta["run"].get("seeds", [0])
+    if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
+        return "run.seeds"
+    if not all(isinstance(row, list) for row in meta["host"].get("curves", [])):
+        return "host.curves"
+    if not all(isinstance(level, dict) for level in meta["host"].get("levels", [])):
+        return "host.levels"
+    return None

@@ -2,8 +2,9 @@
 
 The estimate counts only what the batch must hold at least: the environment state and
 observation of every parallel environment (training, gate and evaluation batches), a
-rollout's observations, and a few copies of the live state that XLA keeps while it
-updates it. Networks, optimizer state and temporaries come on top, so the estimate is
+rollout's observations, the pool of episode starts (``reset_pool``), the running-success
+windows and what a chunk returns of them per update (``success_window``), and a few
+copies of the live state that XLA keeps while it updates it. Networks, optimizer state and temporaries come on top, so the estimate is
 a lower bound: a batch it refuses cannot fit, and one it accepts still may not.
 """
 from __future__ import annotations
@@ -20,6 +21,10 @@ STATE_COPIES = 3
 # per environment and tick of a rollout beyond the observation: action, reward, flags, ...
 TRANSITION_EXTRA_BYTES = 32
 INT32_LIMIT = 2**31 - 1
+# a window's batch slot: float32 total + int32 count, in the learner's and the task's window
+WINDOW_SLOT_BYTES = 2 * 8
+# a chunk returns, per update and window slot, a float32 total and an int32 count
+WINDOW_OUTPUT_BYTES = 8
 
 
 class MemoryEstimateError(ValueError):
@@ -36,11 +41,32 @@ def per_env_bytes(env, env_params) -> tuple[int, int]:
     return _bytes(obs), _bytes(state)
 
 
-def estimate_bytes(obs_bytes: int, state_bytes: int, cfg: TrainConfig, num_seeds: int) -> int:
-    live = num_seeds * cfg.num_envs * (obs_bytes + state_bytes) * STATE_COPIES
+# what to lower for each part of the estimate
+ADVICE = {"batch": "--num-envs or --seeds", "pool": "reset_pool (--set reset_pool=N)",
+          "windows": "success_window (--set success_window=N)"}
+
+
+def estimate_parts(obs_bytes: int, state_bytes: int, cfg: TrainConfig,
+                   num_seeds: int) -> dict[str, int]:
+    """The estimate's bytes by the setting that sizes them (keys of ``ADVICE``)."""
+    env_bytes = obs_bytes + state_bytes
+    live = num_seeds * cfg.num_envs * env_bytes * STATE_COPIES
     rollout = num_seeds * cfg.num_envs * cfg.rollout_ticks * (obs_bytes + TRANSITION_EXTRA_BYTES)
-    side = num_seeds * max(cfg.gate_envs, cfg.eval_envs) * (obs_bytes + state_bytes)
-    return live + rollout + side
+    side = num_seeds * max(cfg.gate_envs, cfg.eval_envs) * env_bytes
+    # the pool is carried (copied as the live state) and refilled by a batch of resets
+    pool = num_seeds * cfg.pool_size * env_bytes * (STATE_COPIES + 1)
+    return {"batch": live + rollout + side, "pool": pool, "windows": window_bytes(cfg, num_seeds)}
+
+
+def estimate_bytes(obs_bytes: int, state_bytes: int, cfg: TrainConfig, num_seeds: int) -> int:
+    return sum(estimate_parts(obs_bytes, state_bytes, cfg, num_seeds).values())
+
+
+def window_bytes(cfg: TrainConfig, num_seeds: int) -> int:
+    """The running-success windows (carried, so copied as the live state) and the chunk's
+    per-update view of them."""
+    slots = num_seeds * cfg.window_slots
+    return slots * (WINDOW_SLOT_BYTES * STATE_COPIES + cfg.updates_per_chunk * WINDOW_OUTPUT_BYTES)
 
 
 def available_bytes() -> int | None:
@@ -71,11 +97,13 @@ def check_fits(env, env_params, cfg: TrainConfig, num_seeds: int) -> int:
             f"{cfg.rollout_ticks} = {per_tick:,} transitions per rollout exceeds 2**31; lower "
             f"--num-envs")
     obs_b, state_b = per_env_bytes(env, env_params)
-    need = estimate_bytes(obs_b, state_b, cfg, num_seeds)
-    have = available_bytes()
+    parts = estimate_parts(obs_b, state_b, cfg, num_seeds)
+    need, have = sum(parts.values()), available_bytes()
     if have is not None and need > have:
+        largest = max(parts, key=parts.get)
         raise MemoryEstimateError(
             f"batch too large: {num_seeds} seeds x num_envs {cfg.num_envs} (rollout_ticks "
-            f"{cfg.rollout_ticks}) needs at least an estimated {_gib(need)}, but "
-            f"{jax.devices()[0].platform} memory is {_gib(have)}; lower --num-envs or --seeds")
+            f"{cfg.rollout_ticks}, reset_pool {cfg.pool_size}, success_window "
+            f"{cfg.window_slots}) needs at least an estimated {_gib(need)}, but "
+            f"{jax.devices()[0].platform} memory is {_gib(have)}; lower {ADVICE[largest]}")
     return need

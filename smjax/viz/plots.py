@@ -15,13 +15,42 @@ import numpy as np
 def _load(run_dir: Path):
     from smjax.train.results import read_curves
 
-    rows = read_curves(run_dir / "curves.csv")
-    meta = json.loads((run_dir / "results.json").read_text()) if (run_dir / "results.json").exists() else {}
-    return rows, meta
+    return read_curves(run_dir / "curves.csv"), read_meta(run_dir)
+
+
+def read_meta(run_dir: Path) -> dict:
+    """The fields of a run's results.json the plot reads ({} without the file), checked:
+    a damaged file is refused naming it and the field, not plotted from wrong types."""
+    path = Path(run_dir) / "results.json"
+    if not path.exists():
+        return {}
+    try:
+        meta = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise ValueError(f"{path} cannot be read ({str(err)[:100]})") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{path} is not a smjax results file (a {type(meta).__name__}, not an "
+                         f"object)")
+    for name in ("method", "algo"):
+        _need(path, name, isinstance(meta.get(name, ""), str), "a string")
+    finetune = meta.get("finetune") or {}
+    _need(path, "finetune", isinstance(finetune, dict), "an object")
+    for name, where in (("final_success", meta), ("finetune.final_success_before", finetune)):
+        values = where.get(name.rsplit(".", 1)[-1]) or []
+        _need(path, name, isinstance(values, list) and all(
+            x is None or (isinstance(x, (int, float)) and not isinstance(x, bool)) for x in values),
+              "a list of numbers")
+    return meta
+
+
+def _need(path: Path, field: str, ok: bool, what: str) -> None:
+    if not ok:
+        raise ValueError(f"{path}: field {field!r} must be {what}")
 
 
 def check_curves(run_dir: Path) -> None:
-    """Refuse, naming the file, a run without a readable curves.csv holding at least one row."""
+    """Refuse, naming the file, a run without a readable curves.csv holding at least one row,
+    or with a damaged results.json."""
     from smjax.train.results import CURVE_COLUMNS, read_curves
 
     path = Path(run_dir) / "curves.csv"
@@ -43,6 +72,7 @@ def check_curves(run_dir: Path) -> None:
                 float(r["running_success"])
         except (TypeError, ValueError):
             raise ValueError(f"{path} line {i} is malformed: {r}") from None
+    read_meta(run_dir)
 
 
 FINETUNE = "finetune"  # the template column of fine-tuning's rows

@@ -80,17 +80,19 @@ def parse_ascii(text: str) -> tuple[np.ndarray, tuple[int, int]]:
 def from_ascii(text: str, task: str = "get_gem", max_steps: int | None = None):
     """(state, params) for that fixed map; every reset with these params restores it.
 
-    A ``get_X`` task on a map without any X can never succeed, so it is refused
-    (ValueError): put an X on the map (glyph in the module docstring) or pass the task the
+    A ``get_X`` task on a map without any X, or a ``make_X`` task on a map without a raw
+    material of X's recipe (make_stick without wood), can never succeed, so it is refused
+    (ValueError): put it on the map (glyph in the module docstring) or pass the task the
     map is for. A map made to test rules rather than to be solved can carry an X in a
     corner nothing reaches."""
     grid, (x, y) = parse_ascii(text)
     goal = C.TASKS[C.check_task(task)]
-    if goal in C.PRIMITIVES and not (grid == C.KIND_ID[goal]).any():
-        glyph = C.GLYPH_OF_KIND[C.KIND_ID[goal]]
-        raise ValueError(f"the map holds no {goal} ({glyph!r}): task {task!r} can never succeed "
-                         f"on it; add a {goal} ({glyph!r}) to the map or pass the task the map is for "
-                         f"(task=...)")
+    for kind in _kinds_needed(goal):
+        if not (grid == C.KIND_ID[kind]).any():
+            glyph = C.GLYPH_OF_KIND[C.KIND_ID[kind]]
+            raise ValueError(f"the map holds no {kind} ({glyph!r}), which task {task!r} needs: it "
+                             f"can never succeed on it; add a {kind} ({glyph!r}) to the map or "
+                             f"pass the task the map is for (task=...)")
     state = CraftState(
         grid=jnp.asarray(grid),
         pos=jnp.array([x, y], jnp.int32),
@@ -100,6 +102,18 @@ def from_ascii(text: str, task: str = "get_gem", max_steps: int | None = None):
     )
     params: CraftParams = make_params(task, max_steps=max_steps, fixed_state=state)
     return state, params
+
+
+def _kinds_needed(goal: str) -> list[str]:
+    """The raw materials ``goal`` cannot be had without: itself if it is one, else those of
+    its recipe, all the way down. (Workshops and a treasure's tool are not required: a
+    map made to show one rule may leave them out.)"""
+    if goal in C.PRIMITIVES:
+        return [goal]
+    needed = []
+    for item in C.ingredients(goal):
+        needed += [kind for kind in _kinds_needed(item) if kind not in needed]
+    return needed
 
 
 def to_ascii(state: CraftState) -> str:

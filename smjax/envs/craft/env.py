@@ -98,7 +98,7 @@ def make_craft(
     observation: str = "paper",
     fixed_map: bool = False,
     max_steps: int | None = None,
-    map_seed: int = 0,
+    map_seed: int | None = None,
     side_cost: str = "held",
 ) -> tuple[CraftEnv, CraftParams]:
     """Build ``(env, params)`` for a Craft task, validating every override value.
@@ -110,9 +110,14 @@ def make_craft(
     fixed_map = parse_bool("fixed_map", fixed_map)
     if max_steps is not None:
         max_steps = parse_int("max_steps", max_steps, 1, INT32_MAX)
-    map_seed = parse_int("map_seed", map_seed, 0, INT32_MAX)
+    if map_seed is not None:
+        map_seed = parse_int("map_seed", map_seed, 0, INT32_MAX)
+        if not fixed_map:  # it would be ignored: every episode draws its own map
+            raise ValueError(f"map_seed={map_seed} chooses the one fixed map, but the map is not "
+                             f"fixed: add --fixed-map (fixed_map=true) or drop map_seed")
     env = CraftEnv(CraftConfig(task=task, observation=observation, side_cost=side_cost))
-    fixed_state = reset.new_state(jax.random.key(map_seed), env.config.world) if fixed_map else None
+    fixed_state = (reset.new_state(jax.random.key(map_seed or 0), env.config.world)
+                   if fixed_map else None)
     return env, make_params(task, max_steps=max_steps, fixed_state=fixed_state)
 
 
@@ -122,7 +127,7 @@ def _factory(task: str):
         observation: str = "paper",
         fixed_map: bool = False,
         max_steps: int | None = None,
-        map_seed: int = 0,
+        map_seed: int | None = None,
         side_cost: str = "held",
     ) -> tuple[CraftEnv, CraftParams]:
         return make_craft(task, observation=observation, fixed_map=fixed_map,
