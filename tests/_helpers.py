@@ -1,7 +1,10 @@
 """Helpers shared by several test files: losing the machine after a checkpoint (the resume
-tests: test_resume, test_sweep, test_finetune, ...) and loading a script of benchmarks/."""
+tests: test_resume, test_sweep, test_finetune, ...), loading a script of benchmarks/, and
+a CLI answer that compiled nothing."""
 import importlib.util
 from pathlib import Path
+
+import jax
 
 from smjax.train.loop import HierarchyTrainer
 
@@ -106,3 +109,28 @@ def as_format_2(out, window: int) -> None:
     host["finetune"]["task_history"] = lists(*windows[3:])
     arrays = [leaves[str(i)] if str(i) in leaves else np.zeros((0,)) for i in range(n - 6)]
     ckpt.save_checkpoint(out, info["step"], arrays, info["meta"] | {"format": 2})
+
+
+_COMPILES = [0]
+
+
+def _count_compiles(event: str, *_args, **_kwargs) -> None:
+    if event == "/jax/core/compile/backend_compile_duration":
+        _COMPILES[0] += 1
+
+
+jax.monitoring.register_event_duration_secs_listener(_count_compiles)
+
+
+def cli_answer(argv, capsys, *, compiles: bool = False) -> tuple[int, str]:
+    """``smjax ARGV``'s exit code and stderr, which holds no traceback and no internal
+    error; unless ``compiles``, nothing was compiled on the way (a refusal comes before
+    any program is built, whatever the machine's speed)."""
+    from smjax.cli import main
+
+    before = _COMPILES[0]
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err, err
+    assert compiles or _COMPILES[0] == before, f"compiled before answering: {err}"
+    return code, err

@@ -27,6 +27,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 import smjax
 from hier_env import make_keydoor
+from _helpers import cli_answer
 from smjax.cli import main
 from smjax.cli_train import parse_value
 from smjax.core.overrides import parse_bool, parse_float, parse_int
@@ -49,13 +50,6 @@ from smjax.train.run import run
 run(make_keydoor(), TrainConfig(**{cfg!r}), [0, 1], {out!r}, progress=False, resume={resume!r})
 """
 ROOT = os.geteuid() == 0  # permissions do not bind root
-
-
-def _cli(argv, capsys) -> tuple[int, str]:
-    code = main(argv)
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    return code, err
 
 
 def _start(out: Path, cfg: dict, resume: bool = False) -> subprocess.Popen:
@@ -116,7 +110,7 @@ def test_craft_maps_refuse_bad_step_caps_and_tasks():
     with pytest.raises(ValueError, match="unknown craft task"):
         from_ascii(REFERENCE_GEM_MAP, task=["get_gem"])
     no_gem = REFERENCE_GEM_MAP.replace("E", ".")
-    with pytest.raises(ValueError, match=r"holds no gem \('E'\): task 'get_gem' can never succeed"):
+    with pytest.raises(ValueError, match=r"holds no gem \('E'\), which task 'get_gem' needs: it can never succeed"):
         from_ascii(no_gem, task="get_gem")
     with pytest.raises(ValueError, match="holds no wood"):
         from_ascii(REFERENCE_GEM_MAP.replace("w", "."), task="get_wood")
@@ -175,7 +169,7 @@ def test_config_file_errors_are_one_line(tmp_path, capsys, content, suffix, need
         path.mkdir()
     elif content is not None:
         path.write_text(content)
-    code, err = _cli(_train(tmp_path, "--config", str(path)), capsys)
+    code, err = cli_answer(_train(tmp_path, "--config", str(path)), capsys)
     assert code == 2 and needle in err and str(path) in err and len(err.strip().splitlines()) <= 2
 
 
@@ -192,7 +186,7 @@ def test_config_file_errors_are_one_line(tmp_path, capsys, content, suffix, need
      "levels' for template 'get_wood'")])
 def test_bad_flags_are_refused_before_compiling(tmp_path, capsys, extra, needle):
     t0 = time.perf_counter()
-    code, err = _cli(_train(tmp_path, *extra), capsys)
+    code, err = cli_answer(_train(tmp_path, *extra), capsys)
     assert code == 2 and needle in err, err
     assert time.perf_counter() - t0 < 15  # no compile happened
 
@@ -255,9 +249,9 @@ def test_bad_output_paths_are_refused_before_compiling(tmp_path, capsys):
     a_file = tmp_path / "file"
     a_file.write_text("x")
     t0 = time.perf_counter()
-    code, err = _cli(["train", "craft/get_wood", "--quiet", "--out", str(a_file)], capsys)
+    code, err = cli_answer(["train", "craft/get_wood", "--quiet", "--out", str(a_file)], capsys)
     assert code == 2 and "is a file" in err
-    code, err = _cli(["train", "craft/get_wood", "--quiet", "--out", str(a_file / "sub")], capsys)
+    code, err = cli_answer(["train", "craft/get_wood", "--quiet", "--out", str(a_file / "sub")], capsys)
     assert code == 2 and "cannot be created" in err
     elapsed = time.perf_counter() - t0
     assert elapsed < 5, elapsed
@@ -266,16 +260,16 @@ def test_bad_output_paths_are_refused_before_compiling(tmp_path, capsys):
         ro.mkdir()
         ro.chmod(stat.S_IRUSR | stat.S_IXUSR)
         try:
-            code, err = _cli(["train", "craft/get_wood", "--quiet", "--out", str(ro)], capsys)
+            code, err = cli_answer(["train", "craft/get_wood", "--quiet", "--out", str(ro)], capsys)
             assert code == 2 and "not writable" in err
         finally:
             ro.chmod(0o755)
 
 
 def test_resume_flag_contradictions(tmp_path, capsys):
-    code, err = _cli(["train", "craft/get_wood", "--resume", str(tmp_path), "--overwrite"], capsys)
+    code, err = cli_answer(["train", "craft/get_wood", "--resume", str(tmp_path), "--overwrite"], capsys)
     assert code == 2 and "contradict" in err
-    code, err = _cli(["train", "craft/get_wood", "--resume", str(tmp_path / "none")], capsys)
+    code, err = cli_answer(["train", "craft/get_wood", "--resume", str(tmp_path / "none")], capsys)
     assert code == 2 and "nothing to resume" in err
 
 
@@ -531,9 +525,9 @@ def test_plot_and_render_refuse_bad_inputs(tmp_path, capsys):
     for d, text in ((empty, ""), (garbage, "\x00\x01 not,a,csv\n1,2\n")):
         d.mkdir()
         (d / "curves.csv").write_text(text)
-        code, err = _cli(["plot", str(d), "--out", str(tmp_path / "p.png")], capsys)
+        code, err = cli_answer(["plot", str(d), "--out", str(tmp_path / "p.png")], capsys)
         assert code == 2 and "curves.csv" in err
-    code, err = _cli(["render", "craft/get_wood", "--steps", "-3"], capsys)
+    code, err = cli_answer(["render", "craft/get_wood", "--steps", "-3"], capsys)
     assert code == 2 and "--steps" in err
 
 
@@ -591,7 +585,7 @@ def test_latest_never_dangles_and_a_second_run_is_refused(tmp_path, capsys):
         while not (out / LOCK_NAME).exists() and time.time() < deadline:
             time.sleep(0.05)
         t0 = time.perf_counter()
-        code, err = _cli(["train", "craft/get_wood", "--quiet", "--out", str(out)], capsys)
+        code, err = cli_answer(["train", "craft/get_wood", "--quiet", "--out", str(out)], capsys)
         refused_in = time.perf_counter() - t0
         assert code == 2 and "in use by a running smjax run" in err and refused_in < 5
         assert proc.wait(timeout=600) == 0, proc.stderr.read()

@@ -11,15 +11,9 @@ os.environ.setdefault("JAX_PLATFORMS", "cpu")
 
 import pytest
 
+from _helpers import cli_answer
 from smjax.cli import main
 from smjax.train.outdir import LOCK_NAME, OutDirError, RunExistsError, prepare_out_dir
-
-
-def _cli(argv, capsys) -> tuple[int, str]:
-    code = main(argv)
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and "internal error" not in err, err
-    return code, err
 
 
 def test_overwrite_deletes_only_what_the_refusal_named(tmp_path):
@@ -96,7 +90,7 @@ def test_the_lock_is_not_taken_over_when_it_is_a_fifo(tmp_path):
 
 def test_an_empty_out_is_refused(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    code, err = _cli(["train", "craft/get_wood", "--quiet", "--out", ""], capsys)
+    code, err = cli_answer(["train", "craft/get_wood", "--quiet", "--out", ""], capsys)
     assert code == 2 and "--out is empty" in err
     assert not (tmp_path / "runs").exists()
     with pytest.raises(OutDirError, match="empty"):
@@ -104,7 +98,7 @@ def test_an_empty_out_is_refused(tmp_path, capsys, monkeypatch):
 
 
 def test_an_overlong_out_name_is_one_line(tmp_path, capsys):
-    code, err = _cli(["train", "craft/get_wood", "--quiet", "--out", str(tmp_path / ("x" * 300))],
+    code, err = cli_answer(["train", "craft/get_wood", "--quiet", "--out", str(tmp_path / ("x" * 300))],
                      capsys)
     assert code == 2 and "cannot be created" in err and len(err) < 600
 
@@ -114,7 +108,7 @@ def test_overwrite_with_a_checkpoints_link_is_one_clear_line(tmp_path, capsys):
     out.mkdir()
     (out / "curves.csv").write_text("x")
     (out / "checkpoints").symlink_to(tmp_path)
-    code, err = _cli(["train", "craft/get_wood", "--quiet", "--out", str(out), "--overwrite"],
+    code, err = cli_answer(["train", "craft/get_wood", "--quiet", "--out", str(out), "--overwrite"],
                      capsys)
     assert code == 2 and "symbolic link" in err
     assert (out / "curves.csv").exists()  # refused before anything was deleted
