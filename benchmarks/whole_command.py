@@ -5,7 +5,7 @@
         train craft/make_stick --seeds 2 --env observation=compact --quiet
 
 Runs ``python -m smjax ARGS --out DIR`` with the smjax package of ``--tree`` (so an older
-checkout can be timed beside the current one in the same session), ``--cache`` as the
+checkout can be timed beside the current one in one run), ``--cache`` as the
 compilation cache (emptied before a ``cold`` run, kept for a ``warm`` one), and appends one
 record per run to ``--out``: wall seconds, the run's own ``wall_seconds`` and
 ``compile_seconds``, its final success, and where it wrote one, its profile.

@@ -127,11 +127,10 @@ class Engine:
         self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
         # host-side array plumbing as one program each, not one tiny program per leaf
         self._stack = jax.jit(lambda states: jax.tree.map(lambda *xs: jnp.stack(xs), *states))
-        self._new_bank = jax.jit(self._copies_per_option)
+        self._per_option = jax.jit(self._copies_per_option)
         self._warm = jax.jit(jax.vmap(agent.warm_start))
         self._warm_joint = jax.jit(lambda learners, bank: jax.vmap(jax.vmap(agent.warm_start))(
             self._copies_per_option(learners), bank))
-        self._pending_per_option = jax.jit(self._copies_per_option)
         # jitted, so it also slices a bank sharded over processes
         self._bank_entry0 = jax.jit(lambda bank: jax.tree.map(lambda p: p[:, 0], bank))
         self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
@@ -182,12 +181,12 @@ class Engine:
         episodes from the root, and no pending decisions (one record per option)."""
         learners = self._warm_joint(learners, bank)
         carry = self.reset(reset_keys, jnp.zeros(reset_keys.shape[:1], jnp.int32))
-        return SeedState(carry.replace(pending=self._pending_per_option(carry.pending)),
+        return SeedState(carry.replace(pending=self._per_option(carry.pending)),
                          learners, keys)
 
     def new_bank(self, learner_states) -> Any:
         """Policy bank per seed: [S, num_options, ...] copies of the learners' initial params."""
-        return self._new_bank(learner_states.params)
+        return self._per_option(learner_states.params)
 
     def _copies_per_option(self, tree):
         """Each leaf [S, ...] as [S, num_options, ...] copies."""

@@ -1,10 +1,10 @@
-"""A run's large programs saved whole, so that a repeated run neither traces nor compiles them.
+"""A run's large programs saved as StableHLO, so that a repeated run does not trace them.
 
 JAX's persistent cache (:mod:`smjax.core.compile_cache`) skips XLA's compile, but every run
 still traces and lowers its programs from Python first: seconds for the training chunk and
 the episodes program on a CPU, paid again by every repeated command. A program whose every
-input is named here is saved after its first compile as a serialized executable, and a
-later run with the same key loads it instead:
+input is named here is exported (``jax.export``) at its first compile, and a later run with
+the same key loads the export and compiles it (a hit in JAX's cache) without tracing:
 
 * the run's identity (registered task, environment overrides, every config field, sweep),
 * the program's name and its arguments' shapes, dtypes and layout,
@@ -12,9 +12,9 @@ later run with the same key loads it instead:
   XLA flags and the JAX settings that change what is compiled.
 
 A run whose programs depend on code outside smjax (a user's environment or hierarchy
-object) passes no identity, and compiles as before. Entries live beside JAX's cache, under
+object) passes no identity, and is traced as before. Entries live beside JAX's cache, under
 ``smjax-programs/``, and go with it (``SMJAX_COMPILATION_CACHE=0`` turns both off); a file
-that fails to load is deleted and the program compiled.
+that fails to load is deleted and the program traced again.
 """
 from __future__ import annotations
 
