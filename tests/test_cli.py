@@ -166,3 +166,16 @@ def test_render_help_describes_its_options(capsys):
     assert "Write a GIF of one episode" in out
     for text in ("the GIF to write", "most environment steps", "frames per second"):
         assert text in out
+
+
+def test_commands_work_when_a_folder_named_smjax_shadows_the_package(monkeypatch, capsys):
+    """A clone folder ``smjax/`` beside a user's script becomes the (empty, namespace)
+    package ``smjax`` while the installed modules still import under it (setuptools'
+    editable finder): the CLI must not reach through the package's ``__init__``."""
+    import types
+
+    shadow = types.ModuleType("smjax")
+    shadow.__path__ = []  # a namespace package: no make, registry or __version__
+    monkeypatch.setitem(sys.modules, "smjax", shadow)
+    assert main(["list", "craft/get_w"]) == 0, capsys.readouterr().err
+    assert "craft/get_wood" in capsys.readouterr().out
