@@ -134,14 +134,14 @@ def _add_bench(sub):
 
 def _cmd_bench(args) -> int:
     from smjax.bench import bench
-    from smjax.train.results import _clean
+    from smjax.train.results import json_safe
 
     # libraries print import notes (MuJoCo's "Failed to import warp") on stdout, which
     # must hold only the JSON line (``smjax bench ... | jq``)
     with contextlib.redirect_stdout(sys.stderr):
         result = bench(args.task, args.num_envs, args.steps, args.repeats,
                        **key_values(args.env, "--env"))
-    print(json.dumps(_clean(result), allow_nan=False))
+    print(json.dumps(json_safe(result), allow_nan=False))
     return 0
 
 
@@ -153,17 +153,19 @@ def _add_list(sub):
 
 
 def _cmd_list(args) -> int:
-    import smjax
+    # from the module, not the package: a folder named smjax beside a user's script can
+    # shadow the package's __init__ while its modules still import
+    from smjax.core.registry import make, registry
 
-    if not any(name.startswith(args.prefix) for name in smjax.registry()):
+    if not any(name.startswith(args.prefix) for name in registry()):
         raise UsageError(f"no registered task starts with {args.prefix!r}; `smjax list` shows "
                          f"them all")
-    for name, desc in smjax.registry().items():
+    for name, desc in registry().items():
         if not name.startswith(args.prefix):
             continue
         print(f"{name:28s} {desc}")
         if args.hierarchies:
-            env, _ = smjax.make(name)
+            env, _ = make(name)
             for hname, h in env.hierarchies().items():
                 print(f"    [{hname}]")
                 for line in h.describe().splitlines():

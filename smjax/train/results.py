@@ -20,16 +20,16 @@ CURVE_COLUMNS = ("seed", "level", "template", "episodes", "env_steps", "running_
 OLD_NAMES = {"avg_return": "running_success"}
 
 
-def _clean(x: Any) -> Any:
+def json_safe(x: Any) -> Any:
     """JSON-safe: NaN -> None, numpy scalars -> Python."""
     if isinstance(x, float):
         return None if math.isnan(x) or math.isinf(x) else x
     if hasattr(x, "item") and getattr(x, "ndim", 1) == 0:
-        return _clean(x.item())
+        return json_safe(x.item())
     if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
+        return [json_safe(v) for v in x]
     if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
+        return {k: json_safe(v) for k, v in x.items()}
     return x
 
 
@@ -95,7 +95,7 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
         per_seed_steps.append(sum(rec["env_steps"][s] for rec in levels) if ok else None)
     final = raw["final"]
     by_policy = raw.get("final_by_policy") or {}
-    return _clean({
+    return json_safe({
         "env": env,
         "task": task,
         "method": method,
@@ -184,7 +184,7 @@ def write_sweep(out_dir: str | Path, sweep: dict) -> None:
     points = [{"overrides": p["overrides"],
                "results": {k: v for k, v in p["results"].items() if k != "_raw"}}
               for p in sweep["points"]]
-    text = json.dumps(_clean({"points": points, "compile_seconds": sweep["compile_seconds"]}),
+    text = json.dumps(json_safe({"points": points, "compile_seconds": sweep["compile_seconds"]}),
                       indent=2, allow_nan=False)
     atomic_write_text(Path(out_dir) / "sweep.json", text + "\n")
 
