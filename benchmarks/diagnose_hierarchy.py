@@ -5,10 +5,10 @@ was on top when an episode ended short of full success, and what each deciding o
 chose (any environment: where a hierarchy loses its episodes, and which choice loops).
 
     python benchmarks/diagnose_hierarchy.py RUN_DIR [--episodes 1024] [--policy sample]
-        [--max-ticks 2000] [--partial] [--json OUT.json] [--trace N]
+        [--max-ticks 2000] [--json OUT.json] [--trace N]
 
-RUN_DIR is a finished ``smjax train ... --out RUN_DIR`` (``--partial``: a stopped one;
-seeds still in their levels play partly trained options). Every seed's hierarchy runs alone
+RUN_DIR is a finished ``smjax train ... --out RUN_DIR``: its saved policy
+(``smjax.load_policy``) is what runs. Every seed's hierarchy runs alone
 (root on the stack, no teleports, nobody learning), as the final evaluation does, and
 each environment's first episode counts.
 
@@ -39,8 +39,8 @@ import numpy as np
 from smjax.envs.craft import constants as C
 from smjax.options.runner import NO_OPTION, Controls
 from smjax.options.stack import stack_top
-from smjax.train.engine import EVAL_TEMPERATURES, eval_temperatures
-from smjax.train.policy import load_trained
+from smjax.options.episodes import EVAL_TEMPERATURES, eval_temperatures
+from smjax.policy import load_policy
 
 
 def _frozen_controls(learned, temperature) -> Controls:
@@ -60,7 +60,7 @@ def _inventory(state):
     return None if inv is None else inv.astype(jnp.float32)
 
 
-def episodes_program(engine, num_envs: int, max_ticks: int):
+def episodes_program(runner, num_envs: int, max_ticks: int):
     """jit(vmap over seeds) of: run ``num_envs`` environments until each has finished one
     episode; per environment (return, success, length in ticks, finished), and, where the
     state has an inventory, the units of each item gained per option [O, K] (summed over
@@ -70,8 +70,7 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
     the ticks of each first episode with each option on top [B, O]; the option on top
     in each first episode's last tick [B]; and how often the option on top chose each
     action where it decided [B, O, A] (the tick's own pick: the same keys as ``tick``)."""
-    runner = engine.runner
-    O, A = engine.h.num_options, engine.h.num_actions
+    O, A = runner.h.num_options, runner.h.num_actions
 
     def one_seed(key, bank, learned, temperature):
         controls = _frozen_controls(learned, temperature)
@@ -107,8 +106,8 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
             """int32 [B, O, A]: one-hot of the top option's pick where it decides now,
             computed as ``tick`` does (its split of ``k``; teleports are off)."""
             k_act, k_frozen = jax.random.split(k, 6)[:2]
-            _, _, frozen, _ = runner._choices(carry, None, bank, controls, callable_, k_act,
-                                              k_frozen)
+            _, _, frozen, _ = runner.policy_choices(carry, None, bank, controls, callable_,
+                                                   k_act, k_frozen)
             pick = jnp.take_along_axis(frozen, top[:, None], 1)[:, 0]
             decides = deciding[top]
             return (jax.nn.one_hot(top, O, dtype=jnp.int32)[:, :, None]
@@ -131,13 +130,11 @@ def episodes_program(engine, num_envs: int, max_ticks: int):
 TRACE_ENVS = 256  # environments a trace plays (its per-tick record is [ticks, envs, items])
 
 
-def trace_program(engine, num_envs: int, ticks: int):
+def trace_program(runner, num_envs: int, ticks: int):
     """jit of: one seed's ``num_envs`` environments for ``ticks`` ticks from reset, as the
     evaluation plays them (nobody learns); the start states, and per tick [T, B] the option
     on top, the inventory [T, B, K] and position [T, B, 2] (zero-width where the state has
     none), whether an episode ended, and its success."""
-    runner = engine.runner
-
     def play(key, bank, learned, temperature):
         controls = _frozen_controls(learned, temperature)
         k_reset, key = jax.random.split(key)
@@ -157,7 +154,7 @@ def trace_program(engine, num_envs: int, ticks: int):
     return jax.jit(play)
 
 
-def trace_lost(engine, start, per_tick, count: int, kinds) -> str:
+def trace_lost(runner, start, per_tick, count: int, kinds) -> str:
     """Text of up to ``count`` first episodes that ended short of the task's best (or were
     still running): the start state, then runs of ticks with the same option on top and
     inventory (``ticks A-B option held={...} pos P..Q``)."""
@@ -165,13 +162,13 @@ def trace_lost(engine, start, per_tick, count: int, kinds) -> str:
     T, B = top.shape
     end = np.where(finished.any(0), finished.argmax(0), T - 1)
     short = [b for b in range(B) if not finished[end[b], b]
-             or success[end[b], b] < engine.h.success_ceiling - 1e-6]
-    names, lines = engine.h.option_names, []
+             or success[end[b], b] < runner.h.success_ceiling - 1e-6]
+    names, lines = runner.h.option_names, []
     for b in short[:count]:
         ran = "ran into the trace's end" if not finished[end[b], b] else \
             f"ended with success {success[end[b], b]:.2f}"
         lines.append(f"== episode {b}: {end[b] + 1} ticks, {ran}")
-        text = engine.env.describe(jax.tree.map(lambda x: x[b], start))
+        text = runner.env.describe(jax.tree.map(lambda x: x[b], start))
         if text:
             lines.append(text)
         runs = []  # [first tick, last tick, (option, held), position at first, at last]
@@ -265,8 +262,6 @@ def main(argv=None) -> int:
     parser.add_argument("--policy", default="sample", choices=sorted(EVAL_TEMPERATURES))
     parser.add_argument("--max-ticks", type=int, default=2000)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--partial", action="store_true",
-                        help="play a run stopped before its last level (its untrained options as they are)")
     parser.add_argument("--json", help="also write the report here")
     parser.add_argument("--trace", type=int, default=0, metavar="N",
                         help="also print N of the first seed's episodes that ended short of "
@@ -274,25 +269,26 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.episodes < 1 or args.max_ticks < 1 or args.trace < 0:
         parser.error("--episodes and --max-ticks must be >= 1, --trace >= 0")
-    engine, bank, learned, seeds = load_trained(args.run_dir, partial=args.partial)
-    program = episodes_program(engine, args.episodes, args.max_ticks)
+    policy = load_policy(args.run_dir)
+    runner, (bank, learned), seeds = policy.runner, policy.params(), policy.seeds
+    program = episodes_program(runner, args.episodes, args.max_ticks)
     keys = jax.random.split(jax.random.key(args.seed), len(seeds))
-    temperature = eval_temperatures(args.policy, engine.h.num_options,
-                                    engine.cfg.option_temperature)
+    temperature = eval_temperatures(args.policy, runner.h.num_options,
+                                    policy.meta["evaluation"]["option_temperature"])
     out = program(keys, bank, learned, temperature)
-    names = list(engine.h.option_names)
-    action_names = list(engine.h.primitive_names[:engine.h.num_primitives]) + names[1:]
+    names = list(runner.h.option_names)
+    action_names = list(runner.h.primitive_names[:runner.h.num_primitives]) + names[1:]
     per_seed = [summarize(*(x[i] for x in out[:4]))
                 | where_time_goes(out[5][i], out[6][i], out[7][i], out[1][i], out[3][i], names,
-                                  action_names, engine.h.success_ceiling)
+                                  action_names, runner.h.success_ceiling)
                 for i in range(len(seeds))]
     gains = np.asarray(out[4]).mean(0)  # [O, K], mean over seeds, per episode
     kinds = C.KIND_NAMES if gains.shape[1] == C.NUM_KINDS else None  # Craft's item names
     if gains.shape[1]:
         for i, p in enumerate(per_seed):
             p |= held_at_end(out[8][i], out[0][i], out[1][i], out[3][i], kinds,
-                             engine.h.success_ceiling)
-    picked = {engine.h.option_names[o]: {_item_name(kinds, k): round(float(v), 3)
+                             runner.h.success_ceiling)
+    picked = {runner.h.option_names[o]: {_item_name(kinds, k): round(float(v), 3)
                                          for k, v in enumerate(gains[o]) if v >= 0.005}
               for o in range(gains.shape[0]) if gains[o].sum() >= 0.005}
     report = {"run_dir": str(args.run_dir), "policy": args.policy, "episodes": args.episodes,
@@ -306,9 +302,9 @@ def main(argv=None) -> int:
         Path(args.json).write_text(text + "\n")
     if args.trace:  # the first seed's start states again (its reset key), fresh tick keys
         first = jax.tree.map(lambda x: x[0], (bank, learned))
-        program = trace_program(engine, min(args.episodes, TRACE_ENVS), args.max_ticks)
+        program = trace_program(runner, min(args.episodes, TRACE_ENVS), args.max_ticks)
         start, per_tick = program(keys[0], *first, temperature)
-        print(trace_lost(engine, start, per_tick, args.trace, kinds), file=sys.stderr)
+        print(trace_lost(runner, start, per_tick, args.trace, kinds), file=sys.stderr)
     return 0
 
 

@@ -112,12 +112,12 @@ def profile(args) -> dict:
               f"{n / run_s:12,.0f} env steps/s", flush=True)
 
     # the whole chunk, as the trainer calls it (no donation here, so it can repeat)
-    chunk = jax.vmap(engine._chunk)
+    chunk = jax.vmap(engine.seed_chunk)
     # a level's per-seed switches, those this tree's chunk takes (older trees take fewer)
     level = {"teleport": jnp.ones((S,), bool), "continue_episodes": jnp.zeros((S,), bool),
              "side_cost": jnp.zeros((S,), jnp.float32),
              "gamma": jnp.full((S,), cfg.gamma, jnp.float32)}
-    takes = inspect.signature(engine._chunk).parameters
+    takes = inspect.signature(engine.seed_chunk).parameters
     if "windows" in takes:  # the running-success windows the trainer pushes every update
         from smjax.train.state import SuccessWindow
 
@@ -211,7 +211,7 @@ def profile(args) -> dict:
 
         def teleports(es, ch, key):
             def body(c, k):
-                s, a = runner._run_family(runner.teleport_families, k, es, ch,
+                s, a = runner.run_family(runner.teleport_families, k, es, ch,
                                           jnp.zeros((B,), runner.action_dtype), controls=False)
                 return c + a.sum(), None
 

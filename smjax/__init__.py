@@ -11,9 +11,17 @@ if _os.environ.get("SMJAX_XLA_WORKAROUND", "1") != "0" and \
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " " + _FLAG).strip()
 
 from smjax.core.registry import make, registry  # noqa: E402
-
-
 from smjax.core.version import smjax_version  # noqa: E402
 
 __version__ = smjax_version()  # the installed distribution's; "0+unknown" in a bare source tree
-__all__ = ["make", "registry", "__version__"]
+__all__ = ["make", "registry", "load_policy", "__version__"]
+
+
+def __getattr__(name: str):
+    """``smjax.load_policy``, imported when first used: importing any part of smjax
+    (``smjax.core`` for an environment alone) does not load the learners."""
+    if name == "load_policy":
+        from smjax.policy import load_policy
+
+        return load_policy
+    raise AttributeError(f"module 'smjax' has no attribute {name!r}")

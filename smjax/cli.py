@@ -1,4 +1,5 @@
-"""The ``smjax`` command: train, bench, list, plot, render. ``smjax COMMAND --help`` explains each."""
+"""The ``smjax`` command: train, bench, list, plot, eval, render. ``smjax COMMAND --help``
+explains each."""
 from __future__ import annotations
 
 import argparse
@@ -10,6 +11,7 @@ import sys
 from pathlib import Path
 
 from smjax.cli_errors import UsageError, user_message
+from smjax.cli_policy import add_eval, add_render, check_image_path, cmd_eval, cmd_render
 from smjax.cli_train import add_distributed, cmd_train, key_values
 
 DESCRIPTION = """\
@@ -17,17 +19,19 @@ smjax: vectorized reinforcement learning with option templates (Sticky Mittens) 
 
 Commands:
   train   train a task top-down (the paper's method), bottom-up or flat; writes
-          results.json, curves.csv and curves.png to --out
+          results.json, curves.csv, curves.png and the saved policy (policy/) to --out
   bench   environment steps per second (one JSON line)
   list    the registered tasks (ENV/TASK) and, with --hierarchies, their hierarchies
+  plot    overlay learning curves of several runs
+  eval    evaluate a run's saved policy: task success and return per seed (one JSON line)
+  render  write a GIF of an episode (random policy, or a run's saved policy with --policy)
 
 Your own environment: a module that calls smjax.core.register("ENV/TASK", factory) when
 imported; name the task MODULE:ENV/TASK, or pass --import MODULE to any command.
-  plot    overlay learning curves of several runs
-  render  write a GIF of an episode (random policy, or a trained hierarchy with --policy)
 
 Examples:
   smjax train craft/get_wood --seeds 2 --out runs/wood
+  smjax eval runs/wood --episodes 256 --seed 1
   smjax train craft/get_gem --method top-down --algo ppo --seeds 10 --out runs/gem
   smjax bench craft/get_gem --num-envs 4096 --steps 200
   smjax train mypkg.envs:keydoor/find_treasure --out runs/treasure
@@ -120,6 +124,9 @@ def _add_train(sub):
                         "checkpoints, results), and write it to OUT/profile.json")
     _add_debug(p)
     add_distributed(p)
+    # what ``cmd_train`` fills in for the error messages of ``_run_command``: the output
+    # directory (the resume command after an interruption), the batch (out of memory)
+    p.set_defaults(run_out=None, run_batch=None)
 
 
 def _add_bench(sub):
@@ -134,7 +141,7 @@ def _add_bench(sub):
 
 def _cmd_bench(args) -> int:
     from smjax.bench import bench
-    from smjax.train.results import json_safe
+    from smjax.core.files import json_safe
 
     # libraries print import notes (MuJoCo's "Failed to import warp") on stdout, which
     # must hold only the JSON line (``smjax bench ... | jq``)
@@ -185,65 +192,11 @@ def _add_plot(sub):
 def _cmd_plot(args) -> int:
     from smjax.viz.plots import check_curves, plot_curves
 
-    _check_image_path(args.out)
+    check_image_path(args.out)
     for d in args.runs:
         check_curves(Path(d))
     print(plot_curves(args.runs, args.out, title=args.title))
     return 0
-
-
-def _add_render(sub):
-    p = sub.add_parser("render", help="write a GIF of an episode",
-                       description="Write a GIF of one episode of ENV/TASK: random actions, or "
-                                   "with --policy the hierarchy a run trained, executing its own "
-                                   "learned options (no teleports).")
-    p.add_argument("task", help="the task, as trained (e.g. craft/get_gem)")
-    p.add_argument("--policy", default=None, metavar="DIR",
-                   help="a run directory: play its trained hierarchy (no teleports); default: random actions")
-    p.add_argument("--out", default="episode.gif", help="the GIF to write (default episode.gif)")
-    p.add_argument("--steps", type=int, default=200,
-                   help="most environment steps to render (default 200; the episode may end sooner)")
-    p.add_argument("--seed-index", type=int, default=0, help="which of the run's seeds to play")
-    p.add_argument("--fps", type=float, default=8, help="frames per second of the GIF (default 8)")
-    p.add_argument("--env", action="append", metavar="KEY=VALUE", help="environment override (random play)")
-    p.add_argument("--partial", action="store_true",
-                   help="with --policy: also play a run stopped before its last level")
-    _add_debug(p)
-
-
-def _cmd_render(args) -> int:
-    from smjax.train.policy import frames_of, play_random, play_trained
-    from smjax.viz.gif import write_gif
-
-    if not 1 <= args.steps <= MAX_RENDER_STEPS:  # each step's frame is kept in memory
-        raise UsageError(f"--steps must be in [1, {MAX_RENDER_STEPS}], got {args.steps}")
-    if not 0.1 <= args.fps <= 1000:  # (a GIF stores a frame's duration in 1/100 s)
-        raise UsageError(f"--fps must be in [0.1, 1000], got {args.fps:g}")
-    _check_image_path(args.out)  # before playing, which may take minutes
-    if args.policy:
-        env, params, states, total = play_trained(args.policy, seed_index=args.seed_index,
-                                                  max_ticks=args.steps, partial=args.partial,
-                                                  task=args.task)
-        note = f"return {total:.2f}"
-    else:
-        env, params, states = play_random(args.task, steps=args.steps,
-                                          env_overrides=key_values(args.env, "--env"))
-        note = "random actions"
-    write_gif(frames_of(env, params, states), args.out, fps=args.fps)
-    print(f"wrote {args.out} ({len(states)} frames, {note})")
-    return 0
-
-
-MAX_RENDER_STEPS = 100_000
-
-
-def _check_image_path(out: str) -> None:
-    """Refuse an output path that cannot take an image file, before any work."""
-    path = Path(out)
-    if not out.strip() or path.is_dir():
-        raise UsageError(f"--out {out!r} is a directory or empty; name an image file")
-    if not path.parent.is_dir():
-        raise UsageError(f"--out {out}: folder {path.parent} does not exist")
 
 
 def _run_command(command, args) -> int:
@@ -252,7 +205,7 @@ def _run_command(command, args) -> int:
         _import_user_modules(args)
         return command(args)
     except KeyboardInterrupt:
-        out = getattr(args, "_out", None)
+        out = getattr(args, "run_out", None)
         how = (f"; resume with: smjax train {args.task} --resume {shlex.quote(str(out))}"
                if out is not None and (Path(out) / "checkpoints").is_dir() else "")
         print(f"interrupted{how}", file=sys.stderr)
@@ -260,7 +213,7 @@ def _run_command(command, args) -> int:
     except Exception as err:  # noqa: BLE001 - every error is reported, in one line
         if getattr(args, "debug", False):
             raise
-        message = user_message(err, getattr(args, "_batch", None))
+        message = user_message(err, getattr(args, "run_batch", None))
         if message is not None:
             print(f"error: {message}", file=sys.stderr)
             return 2
@@ -285,17 +238,18 @@ def main(argv=None) -> int:
     _add_bench(sub)
     _add_list(sub)
     _add_plot(sub)
-    _add_render(sub)
+    add_eval(sub, _add_debug)
+    add_render(sub, _add_debug)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
         return 0
-    if args.command in ("train", "render"):  # bench reports compile time: it compiles afresh
+    if args.command in ("train", "eval", "render"):  # bench reports compile time: it compiles afresh
         from smjax.core.compile_cache import enable_compilation_cache
 
         enable_compilation_cache()
     command = {"train": cmd_train, "bench": _cmd_bench, "list": _cmd_list, "plot": _cmd_plot,
-               "render": _cmd_render}[args.command]
+               "eval": cmd_eval, "render": cmd_render}[args.command]
     # schedulers (SLURM, ...) send SIGTERM before they kill a job: end as on Ctrl-C, lock
     # released and the resume command printed, instead of dying on the spot
     previous = signal.signal(signal.SIGTERM, _terminate)

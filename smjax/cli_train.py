@@ -200,6 +200,7 @@ def cmd_train(args) -> int:
         from smjax.train.distributed import is_writer
         from smjax.train.run import run
     from smjax.core.registry import get_entry
+    from smjax.viz.plots import plot_run
 
     for flag, value in (("--out", args.out), ("--resume", args.resume)):
         if value is not None and not value.strip():  # else the default directory is used
@@ -217,22 +218,23 @@ def cmd_train(args) -> int:
     safe_task = re.sub(r"[^\w.-]", "_", args.task)  # MODULE:ENV/TASK holds ':' and '/'
     out = args.resume or args.out or f"runs/{safe_task}_{cfg.method}"
     slots = len(seeds) * _num_points(sweep)
-    args._batch = batch_description(cfg, slots)  # for an out-of-memory message
-    args._out = out  # for the resume command an interruption prints
+    args.run_batch = batch_description(cfg, slots)  # for an out-of-memory message
+    args.run_out = out  # for the resume command an interruption prints
     results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
                   resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep,
-                  resume_from=args.resume_from)
+                  resume_from=args.resume_from, after_results=plot_run)
     if not is_writer():  # process 0 reports for the whole run
         return 0
     if args.profile:
         _write_profile(out)
     if sweep is None:
         print(json.dumps(_summary(results)))
-        print(f"wrote {Path(out) / 'results.json'}, curves.csv, curves.png")
+        print(f"wrote {Path(out) / 'results.json'}, curves.csv, curves.png, policy/")
     else:
         for k, point in enumerate(results["points"]):
             print(json.dumps({"point": k, "overrides": point["overrides"]} | _summary(point["results"])))
-        print(f"wrote {Path(out) / 'sweep.json'}, point-<k>/results.json, curves.csv, curves.png")
+        print(f"wrote {Path(out) / 'sweep.json'}, point-<k>/results.json, curves.csv, curves.png, "
+              f"policy/")
     sys.stdout.flush()
     return 0
 
@@ -252,7 +254,7 @@ def batch_description(cfg, slots: int) -> str:
 
 def _write_profile(out) -> None:
     """``--profile``: the timeline on stderr and in OUT/profile.json."""
-    from smjax.train.results import atomic_write_text
+    from smjax.core.files import atomic_write_text
 
     print(TIMELINE.report(), file=sys.stderr)
     path = Path(out) / "profile.json"

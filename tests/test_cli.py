@@ -1,4 +1,5 @@
-"""The command line: help, list, bench JSON line, a tiny train + resume + render + plot, errors."""
+"""The command line: help, list, bench JSON line, a tiny train + resume + render + eval + plot,
+errors."""
 import json
 import subprocess
 import sys
@@ -14,7 +15,7 @@ from smjax.core.timeline import TIMELINE
 def test_help_lists_commands(capsys):
     assert main([]) == 0
     out = capsys.readouterr().out
-    for cmd in ("train", "bench", "list", "plot", "render"):
+    for cmd in ("train", "bench", "list", "plot", "eval", "render"):
         assert cmd in out
     with pytest.raises(SystemExit):
         main(["train", "--help"])
@@ -45,7 +46,8 @@ def test_bench_prints_one_json_line():
     (["train", "craft/get_wood", "--set", "num_env=3", "--quiet"], "Did you mean 'num_envs'?"),
     (["train", "craft/get_wood", "--env", "colour=red", "--quiet"], "unknown override"),
     (["bench", "nope/nothing"], "unknown task"),
-    (["render", "craft/get_wood", "--policy", "/nonexistent/run"], "holds no checkpoint"),
+    (["render", "craft/get_wood", "--policy", "/nonexistent/run"], "holds no saved policy"),
+    (["eval", "/nonexistent/run"], "holds no saved policy"),
 ])
 def test_bad_input_is_a_clear_error(argv, message, capsys, tmp_path):
     if argv[0] == "train":
@@ -83,6 +85,10 @@ def test_train_resume_render_plot(tmp_path, capsys, monkeypatch):
         assert im.n_frames >= 1 and im.size[0] > 100
         frame = im.convert("RGB")
         assert len(np.unique(np.asarray(frame).reshape(-1, 3), axis=0)) > 5  # not blank
+    # the saved policy, evaluated on its own, repeats the run's final evaluation
+    assert main(["eval", str(out)]) == 0
+    evaluated = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert evaluated["success"] == results["final_success"]
     png = tmp_path / "overlay.png"
     assert main(["plot", str(out), str(out), "--out", str(png)]) == 0
     assert png.stat().st_size > 5000

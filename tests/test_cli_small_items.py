@@ -32,12 +32,12 @@ def test_plot_refuses_an_existing_directory_as_out(tmp_path, capsys):
     (["--out", "."], "directory"), (["--out", "/no/such/folder/x.gif"], "does not exist"),
 ])
 def test_render_checks_its_arguments_before_playing(tmp_path, capsys, monkeypatch, extra, needle):
-    import smjax.train.policy as policy
+    import smjax.viz.play as play
 
     def never(*a, **k):
         raise AssertionError("played before checking its arguments")
 
-    monkeypatch.setattr(policy, "play_random", never)
+    monkeypatch.setattr(play, "random_frames", never)
     monkeypatch.chdir(tmp_path)
     code, err = cli_answer(["render", "craft/make_stick", *extra], capsys)
     assert code == 2 and needle in err, err

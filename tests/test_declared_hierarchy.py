@@ -10,8 +10,8 @@ from hier_env import make_keydoor
 from smjax.options import HierarchyError, declare
 from smjax.train import TrainConfig
 from smjax.train.config import ConfigError
-from smjax.train.plans import declared_identity
-from smjax.train.policy import load_trained
+from smjax.policy.hierarchies import declared_identity
+from smjax.policy import PolicyError, load_policy
 from smjax.train.run import run
 
 CFG = TrainConfig(num_envs=16, rollout_ticks=8, updates_per_chunk=2, max_episodes_per_level=300,
@@ -71,10 +71,16 @@ def test_resume_and_playback_need_the_same_declared_hierarchy(trained):
     other = env.hierarchies()["scripted"]
     with pytest.raises(ConfigError, match="hierarchy_declared"):
         run((env, params), KEYDOOR_CFG, [0], out, progress=False, resume=True, hierarchy=other)
-    with pytest.raises(ValueError, match="declared in code"):
-        load_trained(out)
-    with pytest.raises(ValueError, match="not trained with this hierarchy"):
-        load_trained(out, hierarchy=other)
+    with pytest.raises(PolicyError, match="passed as \\(env, params\\)"):
+        load_policy(out)
+    with pytest.raises(PolicyError, match="declared in code"):
+        load_policy(out, env=(env, params))
+    with pytest.raises(PolicyError, match="not trained with this hierarchy"):
+        load_policy(out, env=(env, params), hierarchy=other)
+    policy = load_policy(out, env=(env, params), hierarchy=h)
+    assert policy.hierarchy is h
+    assert policy.evaluate()["success"] == res["final_success"]  # the run's own evaluation
+
 
 @pytest.mark.slow
 def test_a_craft_hierarchy_declared_inline_trains_and_plays_back(tmp_path):
@@ -83,8 +89,8 @@ def test_a_craft_hierarchy_declared_inline_trains_and_plays_back(tmp_path):
     h = _two_levels(env, wood)
     res = run("craft/make_stick", CFG, [0], tmp_path / "run", env_overrides=ENV,
               progress=False, hierarchy=h)
-    engine, bank, learned, seeds = load_trained(tmp_path / "run", hierarchy=h)
-    assert engine.h is h and seeds == [0]
+    policy = load_policy(tmp_path / "run", hierarchy=h)
+    assert policy.hierarchy is h and policy.seeds == [0]
     assert res["config"]["hierarchy_used"] == "declared:make_stick"
     assert [lv["template"] for lv in res["levels"]] == ["make_stick", "give_wood"]
     assert np.isfinite(res["final_success"]).all()

@@ -335,7 +335,7 @@ def test_resaving_a_chunk_never_deletes_the_checkpoint_in_force(tmp_path, monkey
     monkeypatch.undo()
     assert ckpt.load_meta(tmp_path)["path"] == "step-3.1"
     np.testing.assert_array_equal(ckpt.load_arrays(tmp_path, _arrays(0.0))["a"], [2, 2, 2])
-    from smjax.train.results import FILE_MODE  # what open() gives: 0644 under umask 022
+    from smjax.core.files import FILE_MODE  # what open() gives: 0644 under umask 022
 
     assert stat.S_IMODE((tmp_path / "checkpoints" / ckpt.LATEST).stat().st_mode) == FILE_MODE
 

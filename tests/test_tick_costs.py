@@ -16,7 +16,8 @@ from hier_env import KeyDoor, make_keydoor
 from smjax.agents import make_agent
 from smjax.options.runner import Controls, HierarchyRunner
 from smjax.train.config import TrainConfig
-from smjax.train.engine import Engine, SeedState, _decide
+from smjax.options.episodes import early_stop_bounds
+from smjax.train.engine import Engine, SeedState
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -200,7 +201,7 @@ def _root_calls_give_key_where(key_cells: tuple[int, ...]):
     args = (jax.random.split(jax.random.PRNGKey(4), 2), state.learner.params, bank, learned,
             give_key, jnp.zeros((2,), jnp.int32), jnp.asarray(True),
             engine._seed_temperatures("sample", 2), jnp.asarray(cfg.gate_max_ticks),
-            jnp.zeros((2,), bool), _decide([None] * 2))
+            jnp.zeros((2,), bool), early_stop_bounds([None] * 2))
     result, _ = engine._run_episodes(args, cfg.gate_envs)
     return {k: np.asarray(v) for k, v in result.items()}
 

@@ -22,6 +22,8 @@ it sees the environment only through ``reset_env``, ``step_env`` and the templat
 """
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -41,6 +43,18 @@ from smjax.options.realise import families, primitive_action, run_family
 from smjax.options.stack import options_on, stack_init
 
 _NEVER = np.iinfo(np.int32).max // 2
+
+
+class TickPlan(NamedTuple):
+    """What a tick decided before the environment steps (leading axis B)."""
+
+    act: ActOutput              # the learner's pick
+    learner_mask: jax.Array     # its action mask [B, A]
+    memory: jax.Array | None    # every option's memory after choosing now [B, O, H]
+    decision: phases.Decision
+    state_in: Any               # the state to step from (a teleport's jump applied)
+    action: jax.Array           # the primitive action [B, ...]
+    teleported: jax.Array       # the option whose teleport jumped (NO_OPTION: none)
 
 
 class HierarchyRunner(PolicyBank):
@@ -194,21 +208,21 @@ class HierarchyRunner(PolicyBank):
         return obs, state, pool.replace(next=(pool.next + reset.sum()) % self.reset_pool)
 
     # ---- one tick for the whole batch: decide, realise, step, pop, account -------------
-    def tick(self, carry: EnvCarry, key: jax.Array, learner_state, bank_params,
-             controls: Controls) -> tuple[EnvCarry, Transition, EpisodeEnds]:
-        """One primitive step for every environment (leading axis B).
+    def primitive_actions(self, carry: EnvCarry, key: jax.Array, learner_state, bank_params,
+                          controls: Controls) -> jax.Array:
+        """The primitive action [B, ...] that ``tick`` with the same arguments steps with
+        (where a teleport jumps, the jump's own action)."""
+        keys = tuple(jax.random.split(key, 6)[:4])  # tick's split: the same picks
+        return self._plan(carry, keys, learner_state, bank_params, controls).action
 
-        ``learner_state`` is what the agent's ``act`` takes; where the learner acts frozen
-        (``Controls.acts_frozen``) only its ``params`` are read, and it may be None where
-        nobody learns (``controls.learner`` is NO_OPTION: evaluation needs no learner). A
-        runner built without an agent (``agent=None``: every decision scripted) takes None for
-        ``learner_state`` and ``bank_params``, nobody learns and nothing is learned.
-        """
-        k_act, k_frozen, k_ctrl, k_tp, k_step, k_reset = jax.random.split(key, 6)
+    def _plan(self, carry: EnvCarry, keys: tuple, learner_state, bank_params,
+              controls: Controls) -> "TickPlan":
+        """The decide and realise phases of a tick, before the environment steps."""
+        k_act, k_frozen, k_ctrl, k_tp = keys
         teleport_on = self.teleports_on(controls)
         deciding = self.deciding(controls.learned, teleport_on)
         callable_ = self.callable_options(deciding, controls.learner, teleport_on)
-        act, learner_mask, frozen, memory = self._choices(
+        act, learner_mask, frozen, memory = self.policy_choices(
             carry, learner_state, bank_params, controls, callable_, k_act, k_frozen)
         pushable = phases.pushable_options(
             deciding, controls.learner, jnp.asarray(self.has_controller),
@@ -220,6 +234,21 @@ class HierarchyRunner(PolicyBank):
             callable_=callable_, num_primitives=self.P))(carry.stack, frozen, own)
         state_in, action, teleported = self._realise(decision, carry.env_state, teleport_on,
                                                       k_ctrl, k_tp)
+        return TickPlan(act, learner_mask, memory, decision, state_in, action, teleported)
+
+    def tick(self, carry: EnvCarry, key: jax.Array, learner_state, bank_params,
+             controls: Controls) -> tuple[EnvCarry, Transition, EpisodeEnds]:
+        """One primitive step for every environment (leading axis B).
+
+        ``learner_state`` is what the agent's ``act`` takes; where the learner acts frozen
+        (``Controls.acts_frozen``) only its ``params`` are read, and it may be None where
+        nobody learns (``controls.learner`` is NO_OPTION: evaluation needs no learner). A
+        runner built without an agent (``agent=None``: every decision scripted) takes None for
+        ``learner_state`` and ``bank_params``, nobody learns and nothing is learned.
+        """
+        k_act, k_frozen, k_ctrl, k_tp, k_step, k_reset = jax.random.split(key, 6)
+        act, learner_mask, memory, decision, state_in, action, teleported = self._plan(
+            carry, (k_act, k_frozen, k_ctrl, k_tp), learner_state, bank_params, controls)
         obs, state, reward, terminated, truncated, info = phases.step(
             self.env, self.env_params, k_step, state_in, action)
         if self.memory is not None:
@@ -271,7 +300,7 @@ class HierarchyRunner(PolicyBank):
         on = options_on(carry.stack, self.h.num_options)
         return jnp.where((on & ~reset[:, None])[..., None], hidden, 0.0)
 
-    def _choices(self, carry: EnvCarry, learner_state, bank_params, controls: Controls,
+    def policy_choices(self, carry: EnvCarry, learner_state, bank_params, controls: Controls,
                  callable_: jax.Array, k_act: jax.Array, k_frozen: jax.Array):
         """What each policy would pick now: the learner's act [B] (and its action mask
         [B, A]), and every frozen policy's masked pick [B, O] (read only where that option
@@ -348,12 +377,12 @@ class HierarchyRunner(PolicyBank):
         only where this tick allows them)."""
         action = primitive_action(decision.primitive, self.action_shape, self.action_dtype)
         if self.controller_families:
-            action = self._run_family(self.controller_families, k_ctrl, env_state,
+            action = self.run_family(self.controller_families, k_ctrl, env_state,
                                       decision.scripted, action, controls=True)
         teleported = decision.teleported
         if self.allow_teleport and self.teleport_families:
             teleported = jnp.where(teleport_on, teleported, NO_OPTION)
-            env_state, action = self._run_family(self.teleport_families, k_tp, env_state,
+            env_state, action = self.run_family(self.teleport_families, k_tp, env_state,
                                                  teleported, action, controls=False)
         return env_state, action, teleported
 
@@ -380,7 +409,7 @@ class HierarchyRunner(PolicyBank):
             return self.reset_on_learner_end
         return ~controls.continue_episodes
 
-    def _run_family(self, fams, key, state, chosen, action, *, controls: bool):
+    def run_family(self, fams, key, state, chosen, action, *, controls: bool):
         """``realise.run_family`` with this runner's environment parameters."""
         return run_family(fams, key, state, chosen, action, self.env_params, self.action_dtype,
                           controls=controls)

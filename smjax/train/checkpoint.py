@@ -51,7 +51,7 @@ import jax
 from smjax.train import distributed as dist
 from smjax.train import manifest as mf
 from smjax.train.outdir import probe_file
-from smjax.train.results import atomic_write_text, fsync_dir
+from smjax.core.files import atomic_write_text, fsync_dir
 
 LATEST = "latest.json"
 

@@ -294,8 +294,8 @@ RUN_SETTINGS = ("tensorboard", "checkpoint_every")
 def resolve_config(base: TrainConfig | None = None, *, saved_run: dict | None = None,
                    file: str | Path | None = None, sets: dict | None = None,
                    agent: dict | None = None) -> TrainConfig:
-    """The one place a run's configuration is assembled (``smjax train``, ``run`` and
-    ``load_trained`` / ``smjax render --policy`` all call it). Later sources override
+    """The one place a run's configuration is assembled (``smjax train`` and ``run`` call
+    it). Later sources override
     earlier ones: ``base`` (a config, else the defaults), the fields a saved run recorded
     (``saved_run``: a checkpoint's run identity; its other keys are ignored), the fields a
     ``file`` sets, ``sets`` (field -> value), and ``agent``, merged into the learner's

@@ -12,14 +12,14 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from smjax.agents.option_batch import joint_batch, options_update
 from smjax.agents.smdp import carry_pending
 from smjax.core.env import select_tree
 from smjax.options.hierarchy import Hierarchy
-from smjax.options.runner import (NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats,
-                                  option_temperatures)
+from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
+    EVAL_TEMPERATURES, early_stop_bounds, eval_temperatures, seed_batched_episodes)
+from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
 from smjax.train.config import TrainConfig
 from smjax.train.program_cache import compile_program
 
@@ -28,34 +28,10 @@ def _same(x):
     return x
 
 
-def _decide(thresholds: list) -> tuple:
-    """Per seed, the episodes program's early-decision inputs (see
-    ``Engine._first_episodes``) for a gate at that threshold (None: run every episode to
-    its end). The float32 bounds are rounded outwards, so a stop agrees with the
-    trainer's float64 comparison."""
-    on, up, down = [], [], []
-    for threshold in thresholds:
-        if threshold is None:
-            on.append(False), up.append(np.inf), down.append(-np.inf)
-            continue
-        t = np.float32(threshold)
-        on.append(True)
-        up.append(t if float(t) >= threshold else np.nextafter(t, np.float32(np.inf)))
-        down.append(t if float(t) <= threshold else np.nextafter(t, np.float32(-np.inf)))
-    return (jnp.asarray(on, bool), jnp.asarray(up, jnp.float32), jnp.asarray(down, jnp.float32))
-
-
 class SeedState(NamedTuple):
     carry: EnvCarry
     learner: Any
     key: jax.Array
-
-
-class _FrozenLearner(NamedTuple):
-    """What the episodes program's runner reads of a learner (it acts as it will once
-    frozen): its params alone, so evaluation can pass any tree of their shape."""
-
-    params: Any
 
 
 def make_learner(env, env_params, cfg: TrainConfig):
@@ -72,25 +48,6 @@ def frozen_mode(cfg: TrainConfig, agent) -> str:
     return agent.frozen_policy if cfg.frozen_policy == "auto" else cfg.frozen_policy
 
 
-# the frozen-policy modes final_success is measured under (temperature; 0 = argmax; a
-# pair: the root's, then every template's): results.json reports every one
-# (final_success_by_policy)
-EVAL_TEMPERATURES = {"greedy": 0.0, "sample": 1.0, "sample_t0.5": 0.5,
-                     "options_t0.5": (1.0, 0.5)}
-
-
-def eval_temperatures(policy: str, num_options: int, option_temperature: float = 1.0) -> jax.Array:
-    """float32 [O]: each option's temperature under an evaluation mode (0 is the root);
-    "sample" samples the templates at ``option_temperature`` (TrainConfig's)."""
-    if policy not in EVAL_TEMPERATURES:
-        raise ValueError(f"policy must be one of {tuple(EVAL_TEMPERATURES)}, got {policy!r}")
-    t = EVAL_TEMPERATURES[policy]
-    root, templates = t if isinstance(t, tuple) else (t, t)
-    if policy == "sample":
-        templates = option_temperature
-    return jnp.asarray(option_temperatures(root, templates, num_options))
-
-
 class Engine:
     """Builds the jitted, seed-vmapped functions for one (env, hierarchy, agent, config)."""
 
@@ -104,22 +61,21 @@ class Engine:
         # teleports as a traced switch (the gate: the level's own setting, teleports above,
         # calls from resets; evaluation: the final product alone, no teleports, no
         # learner; scripted leaf controllers run in both), so both share one program.
-        self.runner = HierarchyRunner(env, env_params, hierarchy, agent, gamma=cfg.gamma,
-                                      frozen_policy=mode, allow_teleport=True,
-                                      reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
-                                      policy_memory=cfg.policy_memory,
-                                      template_temperature=cfg.option_temperature)
+        # (a saved policy rebuilds its runner from these, so it acts as evaluated here)
+        self.runner_settings = dict(gamma=cfg.gamma, frozen_policy=mode, allow_teleport=True,
+                                    reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
+                                    policy_memory=cfg.policy_memory,
+                                    template_temperature=cfg.option_temperature)
+        self.runner = HierarchyRunner(env, env_params, hierarchy, agent, **self.runner_settings)
         # what the policies see (one compiled program: run op by op, an environment's reset
         # compiles dozens of tiny programs before training starts)
         self.example_obs = jax.jit(self._example_obs)(jax.random.PRNGKey(0), env_params)
         self.num_actions = hierarchy.num_actions
         # every argument has a seed axis: each seed trains its own level (or fine-tunes)
-        self.chunk = jax.jit(jax.vmap(self._chunk), donate_argnums=(0,))
+        self.chunk = jax.jit(jax.vmap(self.seed_chunk), donate_argnums=(0,))
         self.joint_chunk = jax.jit(jax.vmap(self._joint_chunk), donate_argnums=(0,))
-        self.episodes = jax.jit(
-            jax.vmap(self._first_episodes,
-                     in_axes=(0, 0, 0, 0, 0, 0, None, 0, None, 0, 0, None)),
-            static_argnums=(11,))
+        # the gate's and the evaluation's episodes (``first_episodes``), one program
+        self.episodes = seed_batched_episodes(self.runner)
         self._compiled_episodes: dict[tuple, Any] = {}
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
@@ -202,9 +158,11 @@ class Engine:
         return jax.tree.map(lambda b, p: b.at[:, option].set(p), bank, params)
 
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
-    def _chunk(self, state: SeedState, active, bank, learned, learner, start, teleport,
+    def seed_chunk(self, state: SeedState, active, bank, learned, learner, start, teleport,
                continue_episodes, side_cost, gamma, windows=None, sizes=None):
-        """``teleport``/``continue_episodes``/``side_cost``: the levels' setting (teleports
+        """One seed's chunk (``chunk`` is this, vmapped over seeds and compiled).
+
+        ``teleport``/``continue_episodes``/``side_cost``: the levels' setting (teleports
         on, episodes reset with the learner's option unless ``TrainConfig.continue_episodes``,
         no side-cost shaping) or fine-tuning's (the learned hierarchy alone, whole task
         episodes, side costs as ``TrainConfig.finetune_side_cost`` says). ``gamma``: the
@@ -228,7 +186,7 @@ class Engine:
         option explores through its own and learns from its own record of every tick
         (``smjax.options.joint``); the learned hierarchy alone (no teleports), whole-task
         episodes from the root. ``gamma``: float [O], each option's discount. The other
-        arguments and the outputs are ``_chunk``'s (the learner metrics per option:
+        arguments and the outputs are ``seed_chunk``'s (the learner metrics per option:
         [U, O])."""
         controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), learned,
                             jnp.asarray(False), jnp.asarray(False), side_cost=side_cost,
@@ -258,7 +216,7 @@ class Engine:
     def _updates(self, state: SeedState, active, controls: Controls, bank, learn, windows,
                  sizes):
         """``updates_per_chunk`` x (rollout + ``learn``) under ``controls``, and the
-        running-success windows (``_chunk`` says what goes in and out)."""
+        running-success windows (``seed_chunk`` says what goes in and out)."""
         runner, cfg = self.runner, self.cfg
 
         def update_step(c, _):
@@ -297,64 +255,6 @@ class Engine:
         return new, stats, metrics, new_windows, running
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
-    def _first_episodes(self, key, learner_params, bank, learned, learner, start, teleport,
-                        temperature, max_ticks, skip, decide, num_envs: int) -> dict:
-        """Run ``num_envs`` environments until each has finished one learner episode (or
-        ``max_ticks``); each environment's first episode counts, so short episodes are not
-        over-represented, and one still unfinished at ``max_ticks`` counts as a failure.
-        An environment whose levels above never called the learner by ``max_ticks`` says
-        nothing about it and is left out of the means (``uncalled``: their share): counted
-        as failures they held a deep level's gate below its threshold however well the
-        option did where it was called.
-        ``skip``: start as finished (under ``vmap`` a skipped seed does not keep the loop
-        running for the others; its result is meaningless).
-
-        ``decide = (on, pass_at, fail_below)``: a gate only needs to know whether the mean
-        success reaches its threshold. With successes in [0, 1], once the finished episodes
-        alone reach ``pass_at``, or even all unfinished ones succeeding could not reach
-        ``fail_below``, the answer is certain and the episodes stop (``on``): the same
-        decision, fewer ticks. The success then reported is the mean so far (unfinished
-        episodes count 0), which lies on the same side of the threshold.
-        ``temperature``: float [O] (per seed), how each frozen policy (and the learner)
-        picks, 0 = greedy."""
-        runner = self.runner
-        controls = Controls(learner, start, learned, teleport, continue_episodes=jnp.asarray(False),
-                            temperature=temperature, acts_frozen=True)
-        k_reset, key = jax.random.split(key)
-        carry = runner.reset(k_reset, controls, num_envs)
-        on, pass_at, fail_below = decide
-
-        def certain(done, success):
-            total = jnp.where(done, success, 0.0).sum() / num_envs
-            best = total + (~done).sum() / num_envs
-            return on & ((total >= pass_at) | (best < fail_below))
-
-        def cond(c):
-            _, _, done, _, success, t = c
-            return ~done.all() & (t < max_ticks) & ~certain(done, success)
-
-        def body(c):
-            carry, key, done, ret, success, t = c
-            key, k = jax.random.split(key)
-            carry, _, ends = runner.tick(carry, k, _FrozenLearner(learner_params), bank,
-                                         controls)
-            first = ends.finished & ~done
-            ret = jnp.where(first, ends.ret, ret)
-            success = jnp.where(first, ends.success, success)
-            return carry, key, done | ends.finished, ret, success, t + 1
-
-        zeros = jnp.zeros((num_envs,), jnp.float32)
-        init = (carry, key, jnp.full((num_envs,), skip, bool), zeros, zeros, jnp.asarray(0))
-        carry, _, done, ret, success, ticks = jax.lax.while_loop(cond, body, init)
-        # (unfinished and not started now: no learner episode ever started there. The early
-        # stops above stay exact: leaving such environments out can only move the mean
-        # between the two bounds ``certain`` uses)
-        uncalled = ~done & ~carry.learner_started
-        counted = jnp.maximum(num_envs - uncalled.sum(), 1)
-        return {"return": ret.sum() / counted, "success": success.sum() / counted,
-                "completed": done.mean(), "uncalled": uncalled.mean(),
-                "env_steps": ticks * num_envs}
-
     @staticmethod
     def _signature(args: tuple, num_envs: int) -> tuple:
         """What a compiled episodes program fixes: shapes, dtypes and how the arrays are
@@ -399,9 +299,9 @@ class Engine:
         policy = self.frozen_policy if policy is None else policy
         due = [True] * S if due is None else due
         bounded = threshold is not None and self.success_bounded
+        decide = early_stop_bounds([threshold if bounded else None] * S)
         per_seed = place((jnp.full((S,), NO_OPTION, jnp.int32), jnp.zeros((S,), jnp.int32),
-                          ~jnp.asarray(due, bool), _decide([threshold if bounded else None] * S),
-                          self._seed_temperatures(policy, S)))
+                          ~jnp.asarray(due, bool), decide, self._seed_temperatures(policy, S)))
         teleport, max_ticks = place((jnp.asarray(False), jnp.asarray(self.cfg.eval_max_ticks)))
         learner, start, skip, decide, temperatures = per_seed
         # the program (shared with the gate) takes learner params; with none, option 0's
@@ -419,7 +319,7 @@ class Engine:
         skipped); a seed's episodes stop once passing its threshold or not is certain."""
         # a template's success is its F_o (0 or 1); the root's is the task's
         bounded = [o != 0 or self.success_bounded for o in learners]
-        decide = _decide([t if b else None for t, b in zip(thresholds, bounded)])
+        decide = early_stop_bounds([t if b else None for t, b in zip(thresholds, bounded)])
         per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
                           ~jnp.asarray(due, bool), decide,
                           self._seed_temperatures(self.frozen_policy, len(learners))))

@@ -5,7 +5,7 @@ writable) and takes an advisory lock on it (``.smjax.lock`` with the owner's pid
 and start time). The lock is an ``flock`` on that file, so the kernel releases it when
 the owner exits in any way (SIGKILL included); a lock file whose lock is free is
 therefore stale, and it is named when a new run takes it over. A directory that already
-holds a run's files (results, curves, checkpoints) is refused unless the caller resumes
+holds a run's files (results, curves, policy, checkpoints) is refused unless the caller resumes
 it or asks to overwrite it, so nothing is replaced without a word; ``--overwrite`` then
 deletes exactly the files the refusal named (inside ``checkpoints``, only smjax's own).
 
@@ -29,8 +29,8 @@ from pathlib import Path
 
 LOCK_NAME = ".smjax.lock"
 # what a run writes into its directory; --overwrite deletes those of them found
-RUN_FILES = ("results.json", "curves.csv", "curves.png", "checkpoints", "tensorboard",
-             "sweep.json", "profile.json")
+RUN_FILES = ("results.json", "curves.csv", "curves.png", "policy", "checkpoints",
+             "tensorboard", "sweep.json", "profile.json")
 
 
 class OutDirError(ValueError):

@@ -3,7 +3,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from smjax.options.hierarchy import Hierarchy, declare
+from smjax.options.hierarchy import Hierarchy
+from smjax.policy.hierarchies import (DECLARED_PREFIX, FLAT_SUFFIX, PRIMITIVES_ONLY,
+                                      hierarchy_named)
 from smjax.train.config import ConfigError, TrainConfig
 
 
@@ -17,31 +19,26 @@ class LevelPlan:
 
 def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
                       ) -> tuple[str, Hierarchy]:
-    """The hierarchy a run uses, and its name for results.json: ``given`` (one declared by
-    the caller, named ``declared:<task>``), else the named one, else the environment's
-    default (the first of its catalogue, ``env.hierarchies()``). The flat method trains
-    that hierarchy's flattening (``Hierarchy.flattened``: one level over its leaves),
-    named ``<name>:flattened``. An environment that declares none trains flat over its
+    """The hierarchy a run uses, and its name for results.json and the saved policy
+    (:mod:`smjax.policy.hierarchies`): ``given`` (one declared by the caller, named
+    ``declared:<task>``), else the named one, else the environment's default (the first
+    of its catalogue, ``env.hierarchies()``). The flat method trains that hierarchy's
+    flattening (``Hierarchy.flattened``: one level over its leaves), named
+    ``<name>:flattened``. An environment that declares none trains flat over its
     primitive actions alone (``primitives:flattened``): flat needs no hierarchy."""
     if given is None and cfg.method == "flat" and cfg.hierarchy is None and not env.hierarchies():
-        return "primitives:flattened", declare(env, "task", {"task": ["primitives"]})
+        return PRIMITIVES_ONLY, hierarchy_named(env, PRIMITIVES_ONLY)
     if given is not None:
         if not isinstance(given, Hierarchy):
             raise ConfigError(f"hierarchy must be a name or a smjax.options.Hierarchy (e.g. from "
                               f"declare(env, task, children)), got {type(given).__name__}")
-        name, chosen = f"declared:{given.task}", given
+        name = f"{DECLARED_PREFIX}{given.task}"
     else:
         options = env.hierarchies()
-        if not options:
-            raise ValueError(f"environment {env.name!r} declares no hierarchies")
-        name = next(iter(options)) if cfg.hierarchy is None else cfg.hierarchy
-        if name not in options:
-            raise ValueError(
-                f"unknown hierarchy {name!r} for {env.name!r}; valid: {', '.join(options)}")
-        chosen = options[name]
+        name = next(iter(options), "") if cfg.hierarchy is None else cfg.hierarchy
     if cfg.method == "flat":
-        return f"{name}:flattened", chosen.flattened()
-    return name, chosen
+        name += FLAT_SUFFIX
+    return name, hierarchy_named(env, name, given)
 
 
 def reachable_root_threshold(cfg: TrainConfig, h: Hierarchy) -> TrainConfig:
@@ -57,18 +54,6 @@ def reachable_root_threshold(cfg: TrainConfig, h: Hierarchy) -> TrainConfig:
     levels[h.task] = dict(levels.get(h.task, {}),
                           threshold=round(cfg.ceiling_fraction * ceiling, 6))
     return cfg.replace(levels=levels)
-
-
-def declared_identity(h: Hierarchy) -> dict:
-    """What a resume must find again of a declared hierarchy (its shape and template names;
-    the templates' functions cannot be compared)."""
-    identity = {"task": h.task, "children": {k: list(v) for k, v in h.children.items()},
-                "templates": sorted(h.templates)}
-    if h.success is not None:  # only where declared, so older checkpoints still resume
-        identity["success"] = getattr(h.success, "__qualname__", type(h.success).__name__)
-    if h.policies:  # scripted options (only where declared, as above)
-        identity["policies"] = sorted(h.policies)
-    return identity
 
 
 def plan_levels(h: Hierarchy, method: str) -> list[LevelPlan]:

@@ -1,16 +1,17 @@
-"""results.json, curves.csv and curves.png, in the format docs/guide.md section 5 describes."""
+"""results.json and curves.csv, in the format docs/guide.md section 5 describes.
+
+curves.png is drawn above this layer (``smjax.viz.plots.plot_run``, which reads these
+files): training never imports plotting."""
 from __future__ import annotations
 
 import csv
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
-from typing import Any
 
 import jax
 
+from smjax.core.files import atomic_write_text, json_safe
 from smjax.core.version import smjax_version
 
 # running_success: the mean success over the last success_window learner episodes (the
@@ -18,63 +19,6 @@ from smjax.core.version import smjax_version
 # name call the column "avg_return"; ``read_curves`` renames it.
 CURVE_COLUMNS = ("seed", "level", "template", "episodes", "env_steps", "running_success")
 OLD_NAMES = {"avg_return": "running_success"}
-
-
-def json_safe(x: Any) -> Any:
-    """JSON-safe: NaN -> None, numpy scalars -> Python."""
-    if isinstance(x, float):
-        return None if math.isnan(x) or math.isinf(x) else x
-    if hasattr(x, "item") and getattr(x, "ndim", 1) == 0:
-        return json_safe(x.item())
-    if isinstance(x, (list, tuple)):
-        return [json_safe(v) for v in x]
-    if isinstance(x, dict):
-        return {k: json_safe(v) for k, v in x.items()}
-    return x
-
-
-def _default_mode() -> int:
-    """What ``open()`` would give a new file (0644 under the usual umask 022): mkstemp's
-    0600 would make results.json private while curves.png is not."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-FILE_MODE = _default_mode()
-
-
-def fsync_dir(path: Path) -> None:
-    """Make a rename or a new entry in ``path`` durable (a no-op where directories cannot
-    be opened)."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write via a fsynced temporary file and rename, so a crash never leaves half a file
-    (nor, after a power loss, an empty one)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, FILE_MODE)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    fsync_dir(path.parent)
 
 
 class ResultsError(RuntimeError):
@@ -174,9 +118,6 @@ def write_results(out_dir: str | Path, results: dict, curves: list[tuple]) -> No
         ret_s = "" if ret is None or (isinstance(ret, float) and math.isnan(ret)) else f"{ret:.6g}"
         rows.append(f"{seed},{level},{template},{eps},{steps},{ret_s}")
     atomic_write_text(out / "curves.csv", "\n".join(rows) + "\n")
-    from smjax.viz.plots import plot_curves
-
-    plot_curves([out], out / "curves.png")
 
 
 def write_sweep(out_dir: str | Path, sweep: dict) -> None:

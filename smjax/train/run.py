@@ -5,7 +5,7 @@ import json
 import sys
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, NamedTuple
 
 from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
@@ -18,12 +18,14 @@ from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.loop import HierarchyTrainer, NonFiniteError
 from smjax.train.program_cache import cacheable_identity
-from smjax.train.plans import (declared_identity, plan_levels, reachable_root_threshold,
-                               resolve_hierarchy)
+from smjax.policy.artifact import policy_meta, write_policy
+from smjax.policy.hierarchies import declared_identity
+from smjax.train.plans import plan_levels, reachable_root_threshold, resolve_hierarchy
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.reward_probe import nonfinite_reward
 from smjax.train.results import ResultsError, build_results, write_results, write_sweep
+from smjax.train.seed_arrays import final_evaluation_keys
 from smjax.train.sweep import normalize_sweep, point_config, point_raw, slot_layout, sweep_points
 
 
@@ -97,13 +99,16 @@ def _claim_out_dir(out_dir, resume: bool, overwrite: bool) -> DirLock | None:
 def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None = None, *,
         env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
         overwrite: bool = False, sweep: dict | None = None,
-        hierarchy: Hierarchy | str | None = None, resume_from: str | None = None) -> dict:
+        hierarchy: Hierarchy | str | None = None, resume_from: str | None = None,
+        after_results: Callable[[Path], Any] | None = None) -> dict:
     """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
 
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
     for environments you define yourself. Returns the results dict (docs/guide.md section 5);
-    with ``out_dir`` also writes results.json, curves.csv, curves.png and checkpoints
-    there. With several processes (``smjax.train.distributed.initialize`` called first,
+    with ``out_dir`` also writes results.json, curves.csv, the saved policy
+    (``policy/``, loaded by ``smjax.load_policy``) and checkpoints there, then calls
+    ``after_results(out_dir)`` (a sweep: with each point's directory), e.g.
+    ``smjax.viz.plots.plot_run`` to draw curves.png as ``smjax train`` does. With several processes (``smjax.train.distributed.initialize`` called first,
     every process running this same call) they train together and only process 0 reads
     and writes ``out_dir``. ``resume=True`` continues from ``out_dir``'s last checkpoint; a checkpoint of
     a different configuration is refused (the error names the differing fields).
@@ -147,16 +152,24 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     with TIMELINE.span("output directory check and lock"):
         lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
     try:
-        return _run_locked(task, cfg, seeds, out_dir, env_overrides, progress, resume, sweep,
-                           hierarchy, resume_from)
+        return _run_locked(task, cfg, seeds, Outputs(out_dir, after_results), env_overrides,
+                           progress, resume, sweep, hierarchy, resume_from)
     finally:
         if lock is not None:
             lock.release()
 
 
-def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides: dict,
-                progress: bool, resume: bool, sweep: dict | None,
+class Outputs(NamedTuple):
+    """Where a run writes (None: nowhere) and what runs after its results are written."""
+
+    out_dir: str | Path | None
+    after_results: Callable[[Path], Any] | None = None
+
+
+def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
+                env_overrides: dict, progress: bool, resume: bool, sweep: dict | None,
                 given: Hierarchy | None = None, resume_from: str | None = None) -> dict:
+    out_dir = outputs.out_dir
     points = sweep_points(sweep) if sweep is not None else None
     with TIMELINE.span("environment, learner and hierarchy"):
         if isinstance(task, str):
@@ -211,10 +224,13 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
         remedy = "fix the reward" if cause else "lower the learning rate"
         why = f"{cause}; " if cause else ""
         raise NonFiniteError(f"{err}; {why}{_kept(out_dir, remedy)}") from None
+    raw["eval_keys"] = final_evaluation_keys(trainer.arrays.keys)
     extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides,
              "success_unbounded": not engine.root_has_threshold}
+    policy = _policy_meta(task, engine, hierarchy_name, given, env_overrides)
     try:
-        return _results(env.name, cfg, seeds, raw, extra, out_dir, points, len(slot_seeds))
+        return _results(env.name, cfg, seeds, raw, extra, outputs, policy, points,
+                        len(slot_seeds))
     except Exception as err:  # noqa: BLE001 - any failure here must not lose the training
         if out_dir is None:
             raise
@@ -226,16 +242,18 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
 
 
 def _results(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
-             out_dir, points: list | None, num_slots: int) -> dict:
-    """The run's results (written to ``out_dir``), or each sweep point's and sweep.json.
-    The final checkpoint (``trained``) was written before: a failure here loses nothing."""
+             outputs: Outputs, policy: dict, points: list | None, num_slots: int) -> dict:
+    """The run's results (written to ``outputs.out_dir``), or each sweep point's and
+    sweep.json. The final checkpoint (``trained``) was written before: a failure here
+    loses nothing."""
     if points is None:
-        return _finish(env_name, cfg, seeds, raw, extra, out_dir)
+        return _finish(env_name, cfg, seeds, raw, extra, outputs, policy)
     out = {"points": [], "compile_seconds": raw["compile_seconds"]}
+    out_dir = outputs.out_dir
     for p, point in enumerate(points):
         part = point_raw(raw, p, len(seeds), num_slots)
-        where = None if out_dir is None else Path(out_dir) / f"point-{p}"
-        results = _finish(env_name, point_config(cfg, point), seeds, part, extra, where)
+        where = outputs._replace(out_dir=None if out_dir is None else Path(out_dir) / f"point-{p}")
+        results = _finish(env_name, point_config(cfg, point), seeds, part, extra, where, policy)
         out["points"].append({"overrides": point, "results": results})
     if out_dir is not None and dist.is_writer():
         write_sweep(out_dir, out)
@@ -250,15 +268,22 @@ _UNBOUNDED = ("{}: the task's success is the episode return, not known to lie in
 
 
 def _finish(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
-            out_dir) -> dict:
-    """results.json (and curves) of a run, or of one point of a sweep."""
+            outputs: Outputs, policy: dict) -> dict:
+    """results.json, curves and the saved policy of a run, or of one point of a sweep."""
     config = cfg.to_dict() | extra
     unbounded = config.pop("success_unbounded", False)
     results = build_results(env_name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config,
                             success_unbounded=unbounded)
+    out_dir = outputs.out_dir
+    # (a collective where the arrays are spread over processes: every process gathers)
+    arrays = None if out_dir is None else dist.gather(
+        {"bank": raw["bank"], "learned": raw["learned"], "eval_keys": raw["eval_keys"]})
     if out_dir is not None and dist.is_writer():
         with TIMELINE.span("results.json, curves.csv, curves.png"):
             write_results(out_dir, results, raw["curves"])
+            write_policy(out_dir, policy | {"seeds": list(seeds), "config": config}, arrays)
+            if outputs.after_results is not None:
+                outputs.after_results(Path(out_dir))
     results_with_raw: dict[str, Any] = dict(results)
     results_with_raw["_raw"] = raw
     return results_with_raw
@@ -274,3 +299,17 @@ def _kept(out_dir, remedy: str) -> str:
                 f"(--overwrite)")
     return (f"the last good checkpoint ({info['path']}, chunk {info['step']}) is kept in "
             f"{ckpt.checkpoint_dir(out_dir)}")
+
+
+def _policy_meta(task, engine: Engine, hierarchy_name: str, given: Hierarchy | None,
+                 env_overrides: dict) -> dict:
+    """The saved policy's description of this run (``smjax.policy.artifact.policy_meta``)."""
+    cfg = engine.cfg
+    return policy_meta(
+        engine.runner, engine.runner_settings,
+        task=task if isinstance(task, str) else engine.env.name,
+        registered=isinstance(task, str), env_overrides=env_overrides, hierarchy=hierarchy_name,
+        declared=None if given is None else declared_identity(given),
+        learner={"algo": cfg.algo, "agent": dict(cfg.agent)},
+        evaluation={"policy": engine.frozen_policy, "option_temperature": cfg.option_temperature,
+                    "episodes": cfg.eval_envs, "max_ticks": cfg.eval_max_ticks})

@@ -65,3 +65,10 @@ def local(x: jax.Array) -> jax.Array:
     """``x`` as an array this process holds whole (host-side derivations such as key
     splits and learner inits work on it; they are then placed on the mesh again)."""
     return x if x.is_fully_addressable else jnp.asarray(dist.gather(x))
+
+
+def final_evaluation_keys(keys: jax.Array) -> jax.Array:
+    """The keys [S] of the final evaluation (``final_success``), from each seed's key at
+    the end of training: a saved policy keeps them, so evaluating it reproduces that
+    figure."""
+    return split_seeds(local(keys), 2)[1]

@@ -177,7 +177,7 @@ class LevelCounters(_Counters):
     reached: bool = False
     gate_success: float | None = None
     # the last attempt's share of environments whose levels above never called the
-    # option (left out of gate_success: Engine._first_episodes)
+    # option (left out of gate_success: smjax.options.episodes.first_episodes)
     gate_uncalled: float | None = None
     gate_attempts: int = 0
     gate_env_steps: int = 0

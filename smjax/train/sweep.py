@@ -163,4 +163,5 @@ def point_raw(raw: dict, p: int, num_seeds: int, num_slots: int) -> dict:
     out["final_by_policy"] = jax.tree.map(cut, raw["final_by_policy"])
     out["bank"] = jax.tree.map(cut, raw["bank"])
     out["learned"] = raw["learned"][lo:hi]
+    out["eval_keys"] = raw["eval_keys"][lo:hi]
     return out

@@ -174,3 +174,10 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
     fig.savefig(out_path, dpi=110)
     plt.close(fig)
     return out_path
+
+
+def plot_run(run_dir) -> Path:
+    """A run's own curves.png, drawn from its curves.csv and results.json (``smjax train``
+    passes this to ``run(..., after_results=...)``; a library caller may do the same)."""
+    run_dir = Path(run_dir)
+    return plot_curves([run_dir], run_dir / "curves.png")

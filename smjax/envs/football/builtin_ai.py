@@ -57,7 +57,7 @@ def quantize_direction(vec: jax.Array) -> jax.Array:
     return jnp.where((sx == 0) & (sy == 0), C.RIGHT, action).astype(jnp.int32)
 
 
-def _lane_blockers(start: jax.Array, ends: jax.Array, opp: jax.Array, width: float) -> jax.Array:
+def lane_blockers(start: jax.Array, ends: jax.Array, opp: jax.Array, width: float) -> jax.Array:
     """For passes start -> ends[j]: how many opponents stand within ``width`` of the lane."""
     ab = ends - start                                             # [11, 2]
     ao = opp - start                                              # [11, 2]
@@ -136,7 +136,7 @@ def carrier_plan(state: FootballState, view: TeamView, difficulty: jax.Array) ->
 
     mate_delta = own - me
     mate_dist = norm2(mate_delta)
-    blockers = _lane_blockers(me, own, opp, 0.03)
+    blockers = lane_blockers(me, own, opp, 0.03)
     mark = own[:, None] - opp[None]
     openness = jnp.sqrt(min_axis(mark[..., 0] ** 2 + mark[..., 1] ** 2, 1))
     pass_score = (0.8 * mate_delta[:, 0] + 1.5 * jnp.minimum(openness, 0.12) - 0.5 * blockers

@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.envs.football import constants as C
-from smjax.envs.football.builtin_ai import _lane_blockers, quantize_direction
+from smjax.envs.football.builtin_ai import lane_blockers, quantize_direction
 from smjax.envs.football.physics import DIRS, dot2, norm2
 from smjax.envs.football.types import FootballState
 from smjax.options import OptionTemplate, declare
@@ -135,7 +135,7 @@ def possession_actions(state: FootballState) -> jax.Array:
     free = ~blocked & on_pitch & (gain > FREE_MIN_GAIN)
     best_free = (jnp.argmax(jnp.where(free, gain, -10.0)) + 1).astype(jnp.int32)
 
-    interceptors = _lane_blockers(me, own, opp, 0.04)
+    interceptors = lane_blockers(me, own, opp, 0.04)
     dist = norm2(own - me)
     mates = jnp.arange(_N)
     mark = own[:, None, :] - opp[None, :, :]
