@@ -27,7 +27,9 @@ def one_run(tree: Path, cache: Path, args: list[str], kind: str) -> dict:
     if kind == "cold":
         shutil.rmtree(cache, ignore_errors=True)
     out = Path(tempfile.mkdtemp(prefix="whole-command-")) / "run"
-    env = dict(os.environ, PYTHONPATH=str(tree.resolve()), SMJAX_CACHE_DIR=str(cache))
+    # the tree first, then whatever the caller's path adds (e.g. wheels installed apart)
+    path = os.pathsep.join(p for p in (str(tree.resolve()), os.environ.get("PYTHONPATH")) if p)
+    env = dict(os.environ, PYTHONPATH=path, SMJAX_CACHE_DIR=str(cache))
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     t0 = time.perf_counter()
     # run from the tree: ``python -m`` puts the working directory first on the path

@@ -160,17 +160,19 @@ def _add_list(sub):
 
 
 def _cmd_list(args) -> int:
-    import smjax
+    # from the module, not the package: a folder named smjax beside a user's script can
+    # shadow the package's __init__ while its modules still import
+    from smjax.core.registry import make, registry
 
-    if not any(name.startswith(args.prefix) for name in smjax.registry()):
+    if not any(name.startswith(args.prefix) for name in registry()):
         raise UsageError(f"no registered task starts with {args.prefix!r}; `smjax list` shows "
                          f"them all")
-    for name, desc in smjax.registry().items():
+    for name, desc in registry().items():
         if not name.startswith(args.prefix):
             continue
         print(f"{name:28s} {desc}")
         if args.hierarchies:
-            env, _ = smjax.make(name)
+            env, _ = make(name)
             for hname, h in env.hierarchies().items():
                 print(f"    [{hname}]")
                 for line in h.describe().splitlines():

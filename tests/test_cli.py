@@ -172,3 +172,21 @@ def test_render_help_describes_its_options(capsys):
     assert "Write a GIF of one episode" in out
     for text in ("the GIF to write", "most environment steps", "frames per second"):
         assert text in out
+
+
+def test_commands_work_when_a_folder_named_smjax_shadows_the_package(monkeypatch, capsys):
+    """A clone folder ``smjax/`` beside a user's script becomes the (empty, namespace)
+    package ``smjax`` while the installed modules still import under it (setuptools'
+    editable finder): the CLI must not reach through the package's ``__init__``."""
+    import types
+
+    from smjax.core.version import shadowing_folder, warn_if_shadowed
+
+    assert shadowing_folder() is None
+    shadow = types.ModuleType("smjax")
+    shadow.__path__ = ["/home/me/smjax"]  # a namespace package: no make, registry, __version__
+    monkeypatch.setitem(sys.modules, "smjax", shadow)
+    assert main(["list", "craft/get_w"]) == 0, capsys.readouterr().err
+    assert "craft/get_wood" in capsys.readouterr().out
+    with pytest.warns(UserWarning, match="the folder /home/me/smjax .* shadows the installed"):
+        warn_if_shadowed()  # what importing smjax.core does: it is never silent

@@ -186,6 +186,23 @@ def test_auto_reset_at_game_end():
     assert bool(trunc) and int(s.step) == 0 and info["final_observation"].shape == (115,)
 
 
+def test_the_episode_cap_is_a_traced_max_steps_in_params():
+    """Named as every smjax environment's cap: check_env shortens it to see episodes end
+    (football's defaults never end one in its rollout), gymnax trainers read it."""
+    from smjax.core.adapters import gymnax_params
+
+    env, params = smjax.make("football/11v11_hard", game_length=40)
+    assert int(params.max_steps) == 40
+    assert gymnax_params(params).max_steps_in_episode == 40
+    _, s = env.reset(jax.random.PRNGKey(0), params)
+    step = jax.jit(env.step_env)  # one program for both caps: the cap is traced
+    for cap, ends in ((3, True), (40, False)):
+        _, _, _, _, trunc, _ = step(jax.random.PRNGKey(0), s.replace(step=jnp.int32(2)),
+                                    jnp.full((11,), 19), params.replace(max_steps=cap))
+        assert bool(trunc) == ends
+    assert step._cache_size() == 1
+
+
 def test_render_draws_an_image():
     env, params = smjax.make("football/11v11_medium")
     _, s = env.reset(jax.random.PRNGKey(0), params)

@@ -89,7 +89,8 @@ class TrainConfig:
       finetune_plateau_episodes: the phase also ends when a block of this many episodes
         gains less than ``finetune_plateau_gain`` over the one before (0: never); 4,000
         averages out the noise while a slow climb still counts.
-      finetune_plateau_gain: the least rise of a block's mean that counts as climbing.
+      finetune_plateau_gain: the least rise of a block's mean that counts as climbing;
+        at 0.02 get_gem stops ~3,000 episodes sooner than at 0.01 for ~0.005 of success.
       finetune_agent: learner hyper-parameters used in fine-tuning instead of ``agent``'s;
         only traced leaves (the sweepable ones), so the phase compiles nothing new.
       finetune_side_cost: in fine-tuning, a template learner is also rewarded by the
@@ -133,7 +134,7 @@ class TrainConfig:
     finetune_continue_episodes: bool = True
     finetune_max_episodes: int = 20_000
     finetune_plateau_episodes: int = 4000
-    finetune_plateau_gain: float = 0.01
+    finetune_plateau_gain: float = 0.02
     finetune_agent: dict = field(default_factory=dict)
     finetune_side_cost: bool = True
     finetune_side_cost_weight: float = 1.0

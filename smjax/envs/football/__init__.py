@@ -2,8 +2,8 @@
 
 Registers ``football/11v11_easy``, ``football/11v11_medium`` and ``football/11v11_hard``
 (opponent difficulty 0.05 / 0.6 / 0.95). Overrides: ``observation`` ("simple115" or
-"paper"), ``game_length`` (3000), ``checkpoint_reward`` (False) and ``difficulty``
-(None = the task's level).
+"paper"), ``game_length`` (3000; ``params.max_steps``, the traced episode cap, starts at
+it), ``checkpoint_reward`` (False) and ``difficulty`` (None = the task's level).
 
 Where things are (each module's docstring documents the rules it implements). The
 modules every environment package has: types (state, params, the per-tick random draws'

@@ -5,7 +5,7 @@ Reward: +1 when the left team scores, -1 when it concedes; with
 ``params.checkpoint_reward`` also the checkpoint shaping (0.1 for each of 10 distance
 thresholds 0.99 - 0.8 k / 9 to (1, 0) first reached with the ball under left control,
 each paid once per episode; a goal pays the unpaid ones). Episodes never terminate;
-they are truncated after ``game_length`` ticks.
+they are truncated after ``params.max_steps`` ticks.
 """
 from __future__ import annotations
 
@@ -20,8 +20,7 @@ from smjax.envs.football.rules import step_game
 from smjax.envs.football.types import FootballParams, FootballState
 
 
-def step(key: jax.Array, state: FootballState, action: jax.Array, params: FootballParams,
-         game_length: int):
+def step(key: jax.Array, state: FootballState, action: jax.Array, params: FootballParams):
     """(next state, reward f32, terminated bool, truncated bool, info) of one tick.
 
     ``action`` i32[11], one per left player: 0..18 the game's actions, 19 = the built-in
@@ -48,7 +47,7 @@ def step(key: jax.Array, state: FootballState, action: jax.Array, params: Footba
 
     reward = (goals[0] - goals[1]).astype(jnp.float32)
     reward = reward + jnp.where(params.checkpoint_reward, shaping, 0.0)
-    truncated = new.step >= game_length
+    truncated = new.step >= params.max_steps
     info = {
         "score": new.score,
         "goal_difference": new.score[0] - new.score[1],

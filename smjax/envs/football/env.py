@@ -6,8 +6,8 @@ right team is always the built-in AI at ``params.difficulty``.
 
 Reward (``dynamics``): +1 when the left team scores, -1 when it concedes; with
 ``params.checkpoint_reward`` also GRF's checkpoint shaping. Episodes never terminate;
-they are truncated after ``game_length`` ticks. Every episode starts from the same
-kick-off (``reset``), so the reset ignores its key.
+they are truncated after ``params.max_steps`` ticks (``game_length`` sets its default).
+Every episode starts from the same kick-off (``reset``), so the reset ignores its key.
 info: ``score`` i32[2] (left, right), ``goal_difference`` (left - right), ``goals``
 scored this tick i32[2].
 """
@@ -29,7 +29,7 @@ DIFFICULTIES = {"easy": 0.05, "medium": 0.6, "hard": 0.95}
 
 
 class FootballEnv(Environment[FootballState, FootballParams]):
-    """11 vs 11 football in jax.numpy (static: observation kind and game length)."""
+    """11 vs 11 football in jax.numpy (static: the observation kind)."""
 
     # Every match starts from the same kick-off: the auto-reset needs no key of its own.
     reset_ignores_key = True
@@ -38,7 +38,8 @@ class FootballEnv(Environment[FootballState, FootballParams]):
                  difficulty: float = 0.6, checkpoint_reward: bool = False):
         self.observation = parse_choice("football observation", observation,
                                         sorted(OBSERVATION_SIZES))
-        # strict: bool("False") is True and int(2.9) is 2; both would pass silently
+        # strict: bool("False") is True and int(2.9) is 2; both would pass silently.
+        # game_length is the default of params.max_steps (GRF's name for it)
         self.game_length = parse_int("game_length", game_length, 1, INT32_MAX)
         self._difficulty = parse_float("difficulty (easy 0.05, medium 0.6, hard 0.95)",
                                        difficulty, 0.0, 1.0)
@@ -48,7 +49,8 @@ class FootballEnv(Environment[FootballState, FootballParams]):
     def default_params(self) -> FootballParams:
         return FootballParams(difficulty=jnp.float32(self._difficulty),
                               teammate_difficulty=jnp.float32(0.95),
-                              checkpoint_reward=jnp.bool_(self._checkpoint_reward))
+                              checkpoint_reward=jnp.bool_(self._checkpoint_reward),
+                              max_steps=jnp.int32(self.game_length))
 
     def get_obs(self, state: FootballState, params: FootballParams | None = None) -> jax.Array:
         return observe(state, self.observation)
@@ -58,7 +60,7 @@ class FootballEnv(Environment[FootballState, FootballParams]):
 
     def step_env(self, key: jax.Array, state: FootballState, action: jax.Array, params: FootballParams):
         new, reward, terminated, truncated, info = dynamics.step(
-            key, state, action, params, self.game_length)
+            key, state, action, params)
         return self.get_obs(new, params), new, reward, terminated, truncated, info
 
     def action_space(self, params: FootballParams | None = None) -> spaces.Discrete:

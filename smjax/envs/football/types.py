@@ -46,11 +46,15 @@ class FootballParams:
     difficulty: the opponent's built-in AI (easy 0.05, medium 0.6, hard 0.95).
     teammate_difficulty: the built-in AI that moves left players whose action is 19.
     checkpoint_reward: add GRF's checkpoint shaping to the scoring reward.
+    max_steps: ticks before an episode is truncated (GRF's game length). Named and traced
+    as every smjax environment's episode cap is, so the contract harness can shorten
+    episodes and gymnax trainers read their evaluation length from it.
     """
 
     difficulty: jax.Array = struct.field(default_factory=lambda: jnp.float32(0.6))
     teammate_difficulty: jax.Array = struct.field(default_factory=lambda: jnp.float32(0.95))
     checkpoint_reward: jax.Array = struct.field(default_factory=lambda: jnp.bool_(False))
+    max_steps: jax.Array = struct.field(default_factory=lambda: jnp.int32(3000))
 
 
 @struct.dataclass
