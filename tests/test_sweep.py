@@ -8,6 +8,7 @@ import pytest
 
 from _helpers import MachineLost, lose_machine_after_save
 from hier_env import make_keydoor
+from smjax.policy import load_policy
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.engine import Engine
@@ -66,6 +67,9 @@ def test_a_sweep_compiles_once_and_each_point_equals_its_run_alone(tmp_path, low
     point = swept["points"][1]["results"]
     assert _numbers(point) == _numbers(alone)
     assert (out / "point-1" / "curves.csv").read_text() == (tmp_path / "alone" / "curves.csv").read_text()
+    # each point saves its own policy, which repeats that point's final evaluation
+    policy = load_policy(out / "point-1", env=make_keydoor())
+    assert policy.evaluate()["success"] == point["final_success"] == alone["final_success"]
 
 
 @pytest.mark.parametrize("sweep, needle", [

@@ -190,16 +190,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
         identity["hierarchy_declared"] = declared_identity(given)
     if sweep is not None:  # a checkpoint of a sweep resumes only that sweep
         identity["sweep"] = sweep
-    # with several processes process 0's view of out_dir decides, so all raise alike
-    existing = ckpt.shared_meta(out_dir, resume_from) if out_dir is not None else None
-    if resume:
-        if existing is None:
-            raise FileNotFoundError(f"nothing to resume: no checkpoint in {ckpt.checkpoint_dir(out_dir)}")
-        check_resumable(out_dir, identity, resume_from)
-    elif existing is not None:  # (prepare_out_dir refuses this first; kept for safety)
-        raise FileExistsError(
-            f"{out_dir} already holds a checkpointed run; pass resume (--resume) to continue it "
-            f"or choose another output directory")
+    _check_checkpoint(out_dir, identity, resume, resume_from)
     plans = plan_levels(hierarchy, cfg.method)
     cfg.check_level_names([p.name for p in plans])
     slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
@@ -217,13 +208,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
     if resume:
         with TIMELINE.span("checkpoint restore"):
             trainer.restore(resume_from)
-    try:
-        raw = trainer.run()
-    except NonFiniteError as err:
-        cause = nonfinite_reward(env, env_params)
-        remedy = "fix the reward" if cause else "lower the learning rate"
-        why = f"{cause}; " if cause else ""
-        raise NonFiniteError(f"{err}; {why}{_kept(out_dir, remedy)}") from None
+    raw = _train(trainer, env, env_params, out_dir)
     raw["eval_keys"] = final_evaluation_keys(trainer.arrays.keys)
     extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides,
              "success_unbounded": not engine.root_has_threshold}
@@ -239,6 +224,31 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
             f"resume it (smjax train ... --resume {out_dir}, or run(..., resume=True)) to "
             f"write its results without training again. Writing them failed: "
             f"{type(err).__name__}: {err}") from err
+
+
+def _check_checkpoint(out_dir, identity: dict, resume: bool, resume_from: str | None) -> None:
+    """A resume needs a checkpoint of this very run in ``out_dir``; a fresh run none."""
+    # with several processes process 0's view of out_dir decides, so all raise alike
+    existing = ckpt.shared_meta(out_dir, resume_from) if out_dir is not None else None
+    if resume:
+        if existing is None:
+            raise FileNotFoundError(f"nothing to resume: no checkpoint in {ckpt.checkpoint_dir(out_dir)}")
+        check_resumable(out_dir, identity, resume_from)
+    elif existing is not None:  # (prepare_out_dir refuses this first; kept for safety)
+        raise FileExistsError(
+            f"{out_dir} already holds a checkpointed run; pass resume (--resume) to continue it "
+            f"or choose another output directory")
+
+
+def _train(trainer: HierarchyTrainer, env, env_params, out_dir) -> dict:
+    """``trainer.run()``; a non-finite update says its likely cause and what is kept."""
+    try:
+        return trainer.run()
+    except NonFiniteError as err:
+        cause = nonfinite_reward(env, env_params)
+        remedy = "fix the reward" if cause else "lower the learning rate"
+        why = f"{cause}; " if cause else ""
+        raise NonFiniteError(f"{err}; {why}{_kept(out_dir, remedy)}") from None
 
 
 def _results(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
