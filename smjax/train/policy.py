@@ -12,17 +12,20 @@ from smjax.options.runner import NO_OPTION, Controls
 from smjax.train import checkpoint as ckpt
 from smjax.train.config import resolve_config
 from smjax.train.engine import Engine, make_learner
-from smjax.train.loop import HierarchyTrainer
-from smjax.train.plans import declared_identity, plan_levels, resolve_hierarchy
+from smjax.train.loop import CHECKPOINT_FORMAT, HierarchyTrainer
+from smjax.train.plans import declared_identity, plan_levels, resolve_hierarchy, stage_count
+from smjax.train.restorable import check_restorable
 
 
 def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None = None,
-                 hierarchy=None):
+                 hierarchy=None, seed_index: int | None = None):
     """(engine, bank, learned, seeds) of the run checkpointed in ``run_dir``.
 
     A run stopped before its last level would play a partly untrained hierarchy: refused
     unless ``partial``. ``task``, when given, must be the run's task. A run trained with a
-    declared hierarchy (``run(..., hierarchy=Hierarchy)``) needs the same one here."""
+    declared hierarchy (``run(..., hierarchy=Hierarchy)``) needs the same one here.
+    ``seed_index``, when given, must name one of the run's seeds. Every refusal comes
+    before the engine compiles anything."""
     info = ckpt.load_meta(run_dir)
     if info is None:
         raise FileNotFoundError(f"{run_dir} holds no checkpoint (train with --out {run_dir} first)")
@@ -40,25 +43,29 @@ def load_trained(run_dir: str | Path, *, partial: bool = False, task: str | None
         raise ValueError(f"{run_dir} was not trained with this hierarchy")
     env, params = make(run["task"], **run["env_overrides"])
     _, hierarchy = resolve_hierarchy(env, cfg, hierarchy)
-    engine = Engine(env, params, hierarchy, make_learner(env, params, cfg), cfg)
-    trainer = HierarchyTrainer(engine, plan_levels(hierarchy, cfg.method), run["seeds"],
-                               out_dir=run_dir, progress=False, run_meta=run)
-    trainer.restore()
-    done, total = min(trainer.state.stage), len(trainer.plans)
+    plans = plan_levels(hierarchy, cfg.method)
+    seeds = run["seeds"]
+    checked = check_restorable(run_dir, None, len(seeds), stage_count(hierarchy, plans, cfg),
+                               CHECKPOINT_FORMAT)
+    done, total = min(checked[0]["meta"]["host"]["stage"]), len(plans)
     if done < total and not partial:
         raise ValueError(f"{run_dir} stopped with a seed after {done} of {total} levels, so its hierarchy is "
                          f"partly untrained; finish it with `smjax train {run['task']} --resume "
                          f"{run_dir}`, or pass --partial to play it anyway")
-    return engine, trainer.arrays.bank, trainer.arrays.learned, run["seeds"]
+    if seed_index is not None and not 0 <= seed_index < len(seeds):
+        raise ValueError(f"seed_index (--seed-index) must be in [0, {len(seeds)}), got {seed_index}")
+    engine = Engine(env, params, hierarchy, make_learner(env, params, cfg), cfg)
+    trainer = HierarchyTrainer(engine, plans, seeds, out_dir=run_dir, progress=False,
+                               run_meta=run)
+    trainer.restore(checked=checked)
+    return engine, trainer.arrays.bank, trainer.arrays.learned, seeds
 
 
 def play_trained(run_dir: str | Path, *, seed_index: int = 0, max_ticks: int = 500, key=None,
                  partial: bool = False, task: str | None = None, hierarchy=None):
     """States of one episode of the trained hierarchy (no teleports), seed ``seed_index``."""
     engine, bank, learned, seeds = load_trained(run_dir, partial=partial, task=task,
-                                                hierarchy=hierarchy)
-    if not 0 <= seed_index < len(seeds):
-        raise ValueError(f"seed_index must be in [0, {len(seeds)}), got {seed_index}")
+                                                hierarchy=hierarchy, seed_index=seed_index)
     bank = jax.tree.map(lambda x: x[seed_index], bank)
     learned = learned[seed_index]
     runner = engine.runner

@@ -16,12 +16,13 @@ from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_d
                                  resolve_config)
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
-from smjax.train.loop import HierarchyTrainer, NonFiniteError
+from smjax.train.loop import CHECKPOINT_FORMAT, HierarchyTrainer, NonFiniteError
 from smjax.train.program_cache import cacheable_identity
-from smjax.train.plans import (declared_identity, plan_levels, reachable_root_threshold,
-                               resolve_hierarchy)
+from smjax.train.plans import (check_joint_learner, declared_identity, plan_levels,
+                               reachable_root_threshold, resolve_hierarchy, stage_count)
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
+from smjax.train.restorable import check_restorable
 from smjax.train.reward_probe import nonfinite_reward
 from smjax.train.results import ResultsError, build_results, write_results, write_sweep
 from smjax.train.sweep import normalize_sweep, point_config, point_raw, slot_layout, sweep_points
@@ -189,8 +190,13 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
             f"or choose another output directory")
     plans = plan_levels(hierarchy, cfg.method)
     cfg.check_level_names([p.name for p in plans])
+    check_joint_learner(hierarchy, cfg, agent)
     slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
                              else (seeds, None, None))
+    # the checkpoint's files and host state, checked before the trainer compiles anything
+    checked = (check_restorable(out_dir, resume_from, len(slot_seeds),
+                                stage_count(hierarchy, plans, cfg), CHECKPOINT_FORMAT)
+               if resume else None)
     with TIMELINE.span("memory check, engine and trainer"):
         check_fits(env, env_params, cfg, len(slot_seeds))
         engine = Engine(env, env_params, hierarchy, agent, cfg)
@@ -203,7 +209,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], out_dir, env_overrides
                       stacklevel=3)
     if resume:
         with TIMELINE.span("checkpoint restore"):
-            trainer.restore(resume_from)
+            trainer.restore(resume_from, checked)
     try:
         raw = trainer.run()
     except NonFiniteError as err:
