@@ -233,15 +233,25 @@ def _cmd_render(args) -> int:
 
 
 MAX_RENDER_STEPS = 100_000
+MAX_MESSAGE = 2_000  # characters of an error line (a task list is the longest meant)
 
 
 def _check_image_path(out: str) -> None:
     """Refuse an output path that cannot take an image file, before any work."""
+    from smjax.cli_train import short_text
+    from smjax.train.outdir import check_path_names
+
+    check_path_names("--out", out)
     path = Path(out)
-    if not out.strip() or path.is_dir():
-        raise UsageError(f"--out {out!r} is a directory or empty; name an image file")
-    if not path.parent.is_dir():
-        raise UsageError(f"--out {out}: folder {path.parent} does not exist")
+    try:
+        is_dir, has_folder = path.is_dir(), path.parent.is_dir()
+    except OSError as err:  # e.g. a path longer than the system allows
+        raise UsageError(f"--out {short_text(out)}: {err.strerror or err}") from None
+    if not out.strip() or is_dir:
+        raise UsageError(f"--out {short_text(out)} is a directory or empty; name an image file")
+    if not has_folder:
+        raise UsageError(f"--out {short_text(out)}: folder {short_text(str(path.parent))} does "
+                         f"not exist")
 
 
 def _run_command(command, args) -> int:
@@ -258,9 +268,12 @@ def _run_command(command, args) -> int:
     except Exception as err:  # noqa: BLE001 - every error is reported, in one line
         if getattr(args, "debug", False):
             raise
+        from smjax.train.bounds import short_message
+
         message = user_message(err, getattr(args, "_batch", None))
         if message is not None:
-            print(f"error: {message}", file=sys.stderr)
+            # a message that repeats a huge value (a 200 kB field) stays readable
+            print(f"error: {short_message(message, MAX_MESSAGE)}", file=sys.stderr)
             return 2
         print(f"error: internal error {type(err).__name__}: {str(err).strip()[:300]} (rerun "
               f"with --debug for the traceback and report it)", file=sys.stderr)

@@ -29,6 +29,7 @@ def test_plot_refuses_an_existing_directory_as_out(tmp_path, capsys):
 @pytest.mark.parametrize("extra, needle", [
     (["--steps", str(10**9)], "--steps"), (["--fps", "1e-6"], "--fps"),
     (["--out", "."], "directory"), (["--out", "/no/such/folder/x.gif"], "does not exist"),
+    (["--out", "x" * 252 + ".gif"], "at most 255 bytes"),
 ])
 def test_render_checks_its_arguments_before_playing(tmp_path, capsys, monkeypatch, extra, needle):
     import smjax.train.policy as policy

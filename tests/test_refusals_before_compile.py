@@ -106,3 +106,12 @@ def test_a_resume_that_differs_is_refused_before_compiling(tmp_path, capsys):
     code, err = cli_answer(["train", TASK, "--quiet", "--resume", str(tmp_path / "r"),
                             "--set", "gamma=0.5"], capsys)
     assert code == 2 and "differs in gamma" in err, err
+
+
+def test_an_error_never_repeats_a_huge_value(tmp_path, capsys):
+    code, err = cli_answer(["train", TASK, "--quiet", "--out", str(tmp_path / "r"),
+                            "--set", "hierarchy=" + "h" * 200_000], capsys)
+    assert code == 2 and "unknown hierarchy" in err and len(err) < 600, err[:300]
+    # a message that repeats a value whole anyway is cut where the CLI prints it
+    code, err = cli_answer(["train", "craft/" + "x" * 100_000, "--out", str(tmp_path / "r")], capsys)
+    assert code == 2 and "unknown task" in err and len(err) < 2_100, len(err)

@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from smjax.options.hierarchy import Hierarchy, declare
+from smjax.train.bounds import short
 from smjax.train.config import ConfigError, TrainConfig
 
 
@@ -56,7 +57,7 @@ def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None
         name = next(iter(options)) if cfg.hierarchy is None else cfg.hierarchy
         if name not in options:
             raise ValueError(
-                f"unknown hierarchy {name!r} for {env.name!r}; valid: {', '.join(options)}")
+                f"unknown hierarchy {short(name)} for {env.name!r}; valid: {', '.join(options)}")
         chosen = options[name]
     if cfg.method == "flat":
         return f"{name}:flattened", chosen.flattened()
