@@ -199,6 +199,9 @@ def _cmd_plot(args) -> int:
     return 0
 
 
+MAX_MESSAGE = 2_000  # characters of an error line (a task list is the longest meant)
+
+
 def _run_command(command, args) -> int:
     """Run a command; a user's mistake is one line on stderr and exit code 2."""
     try:
@@ -213,9 +216,12 @@ def _run_command(command, args) -> int:
     except Exception as err:  # noqa: BLE001 - every error is reported, in one line
         if getattr(args, "debug", False):
             raise
+        from smjax.train.bounds import short_message
+
         message = user_message(err, getattr(args, "run_batch", None))
         if message is not None:
-            print(f"error: {message}", file=sys.stderr)
+            # a message that repeats a huge value (a 200 kB field) stays readable
+            print(f"error: {short_message(message, MAX_MESSAGE)}", file=sys.stderr)
             return 2
         print(f"error: internal error {type(err).__name__}: {str(err).strip()[:300]} (rerun "
               f"with --debug for the traceback and report it)", file=sys.stderr)

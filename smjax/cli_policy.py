@@ -16,11 +16,20 @@ MAX_EVAL_EPISODES = 1_000_000
 
 def check_image_path(out: str) -> None:
     """Refuse an output path that cannot take an image file, before any work."""
+    from smjax.cli_train import short_text
+    from smjax.train.outdir import check_path_names
+
+    check_path_names("--out", out)
     path = Path(out)
-    if not out.strip() or path.is_dir():
-        raise UsageError(f"--out {out!r} is a directory or empty; name an image file")
-    if not path.parent.is_dir():
-        raise UsageError(f"--out {out}: folder {path.parent} does not exist")
+    try:
+        is_dir, has_folder = path.is_dir(), path.parent.is_dir()
+    except OSError as err:  # e.g. a path longer than the system allows
+        raise UsageError(f"--out {short_text(out)}: {err.strerror or err}") from None
+    if not out.strip() or is_dir:
+        raise UsageError(f"--out {short_text(out)} is a directory or empty; name an image file")
+    if not has_folder:
+        raise UsageError(f"--out {short_text(out)}: folder {short_text(str(path.parent))} does "
+                         f"not exist")
 
 
 def add_eval(sub, add_debug) -> None:

@@ -36,8 +36,7 @@ def test_xla_cpu_out_of_memory_is_a_user_error(text):
 def test_the_memory_estimate_counts_the_pool_and_the_windows(tmp_path, capsys, monkeypatch,
                                                              sets, setting):
     monkeypatch.setattr(memory, "available_bytes", lambda: 2 * 2**30)
-    # (refused once the environment is built: making it may compile a few tiny programs)
-    code, err = cli_answer(_train(tmp_path, "--num-envs", "8", *sets), capsys, compiles=True)
+    code, err = cli_answer(_train(tmp_path, "--num-envs", "8", *sets), capsys)
     assert code == 2 and "batch too large" in err and f"lower {setting}" in err, err
     assert len(err.strip().splitlines()) == 1
 

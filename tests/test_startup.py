@@ -1,10 +1,13 @@
 """Start-up: a run imports only what it uses (plotting, TensorBoard and MuJoCo cost
-seconds of import before anything trains), and the timeline that ``--profile`` prints."""
+seconds of import before anything trains), the timeline that ``--profile`` prints, and
+the program cache (its keys, its entries written atomically)."""
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from smjax.core.timeline import Timeline
 
@@ -109,3 +112,32 @@ def test_only_runs_named_by_smjax_code_are_cached():
     assert named == {"task": "craft/get_wood", "gamma": 0.9}  # seeds are inputs, not program
     assert pc.cacheable_identity(("env", "params"), None, identity) is None
     assert pc.cacheable_identity("craft/get_wood", object(), identity) is None
+
+
+def test_a_failed_atomic_write_leaves_neither_file_nor_temporary(tmp_path, monkeypatch):
+    """results.json and the program cache's entries share one writer: a failed write
+    leaves no temporary file behind (the cache's is best effort: no error either)."""
+    from smjax.train import program_cache as pc
+    from smjax.core.files import FILE_MODE, atomic_write_bytes, atomic_write_text
+
+    atomic_write_text(tmp_path / "a.json", "{\"é\": 1}\n")
+    assert json.loads((tmp_path / "a.json").read_text(encoding="utf-8")) == {"é": 1}
+    atomic_write_bytes(tmp_path / "b.bin", b"\x00\x01", durable=False)
+    assert (tmp_path / "b.bin").read_bytes() == b"\x00\x01"
+    assert (tmp_path / "b.bin").stat().st_mode & 0o777 == FILE_MODE
+
+    class Exported:
+        def serialize(self):
+            return b"program"
+
+    def no_rename(*args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", no_rename)
+    pc._save(tmp_path / "cache" / "p.bin", Exported(), None)  # best effort: no error
+    with pytest.raises(OSError):
+        atomic_write_text(tmp_path / "c.json", "{}")
+    monkeypatch.undo()
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["a.json", "b.bin"]
+    pc._save(tmp_path / "cache" / "p.bin", Exported(), None)
+    assert (tmp_path / "cache" / "p.bin").stat().st_size > 0

@@ -44,7 +44,8 @@ def hierarchy_named(env, name: str, declared: Hierarchy | None = None) -> Hierar
         if not options:
             raise ValueError(f"environment {env.name!r} declares no hierarchies")
         if base not in options:
+            shown = base if len(base) <= 80 else base[:77] + "..."  # a name may be a whole file
             raise ValueError(
-                f"unknown hierarchy {base!r} for {env.name!r}; valid: {', '.join(options)}")
+                f"unknown hierarchy {shown!r} for {env.name!r}; valid: {', '.join(options)}")
         chosen = options[base]
     return chosen.flattened() if name.endswith(FLAT_SUFFIX) else chosen

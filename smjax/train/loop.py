@@ -30,11 +30,11 @@ from smjax.train.seed_arrays import (  # noqa: F401 - NonFiniteError re-exported
     NonFiniteError, all_finite, local, select_seeds, split_seeds,
 )
 from smjax.train import distributed as dist
-from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig
+from smjax.train.config import RUN_SETTINGS, TrainConfig
 from smjax.train.engine import EVAL_TEMPERATURES, Engine, SeedState
 from smjax.train.levels import LevelPhase
-from smjax.train.manifest import check_host
-from smjax.train.plans import LevelPlan, plan_levels
+from smjax.train.restorable import check_restorable
+from smjax.train.plans import LevelPlan, check_joint_learner, finetune_order
 from smjax.train.progress import Progress
 from smjax.train.sharding import seed_sharding, state_shardings, training_mesh
 from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
@@ -61,12 +61,9 @@ class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
         self.cfg = engine.cfg
         self.cfg.check_level_names([p.name for p in plans])
         # after the levels, a seed fine-tunes (one stage more) unless it is off
-        self.ft_order = plan_levels(engine.h, "top-down") if self.cfg.finetune_on else []
+        self.ft_order = finetune_order(engine.h, self.cfg)
+        check_joint_learner(engine.h, self.cfg, engine.agent)
         self.joint = bool(self.ft_order) and self.cfg.finetune_mode == "joint"
-        if self.joint and engine.agent.hidden_size:
-            raise ConfigError("config field 'finetune_mode' = 'joint' does not run a recurrent "
-                              "policy (--agent recurrent_size): add --finetune-mode turns "
-                              "(finetune_mode: turns)")
         self.num_stages = len(plans) + bool(self.ft_order)
         self.out_dir = out_dir
         self.writer = dist.is_writer()  # process 0: the only one that writes files or draws bars
@@ -126,25 +123,27 @@ class HierarchyTrainer(LevelPhase, ft.FinetunePhase):
             ckpt.save_checkpoint(self.out_dir, self.state.chunks, arrays, meta)
         self._last_save = time.perf_counter()
 
-    def restore(self, step: str | None = None) -> bool:
+    def restore(self, step: str | None = None, checked: tuple[dict, int] | None = None) -> bool:
         """Resume from process 0's checkpoint (its latest, or ``step``; formats 2 and 3 are
-        migrated), verified against its manifest and the plan; the same on every process."""
-        info = ckpt.shared_meta(self.out_dir, step) if self.out_dir is not None else None
-        if info is None:
+        migrated), verified against its manifest and the plan; the same on every process.
+        ``checked``: what ``check_restorable`` returned for that checkpoint, where the caller
+        checked it before building this trainer (its files are not hashed twice)."""
+        if self.out_dir is None:
             return False
-        version = ckpt.check_format(self.out_dir, info["meta"], 2, CHECKPOINT_FORMAT)
-        problem = check_host(info["meta"]["host"], len(self.seeds), self.num_stages)
-        if problem:
-            raise ckpt.CheckpointError(f"checkpoint {info['path']} in "
-                                       f"{ckpt.checkpoint_dir(self.out_dir)} cannot belong to "
-                                       f"this run: {problem}")
+        if checked is None:
+            checked = check_restorable(self.out_dir, step, len(self.seeds), self.num_stages,
+                                       CHECKPOINT_FORMAT)
+        if checked is None:
+            return False
+        info, version = checked
         like = self.arrays.as_stored(version)
         if dist.is_multiprocess():
             like = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), like)
-            loaded = ckpt.load_arrays(self.out_dir, like, step) if self.writer else like
+            loaded = (ckpt.load_arrays(self.out_dir, like, step, verified=True) if self.writer
+                      else like)
             loaded = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
         else:
-            loaded = ckpt.load_arrays(self.out_dir, like, step)
+            loaded = ckpt.load_arrays(self.out_dir, like, step, verified=True)
         self.arrays = loaded.migrated(info["meta"]["host"], self.cfg.window_slots,
                                       levels_bank=self.arrays.levels_bank is not None)
         self.state = TrainerState.from_json(info["meta"]["host"])

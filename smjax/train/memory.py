@@ -36,8 +36,9 @@ def _bytes(tree) -> int:
 
 
 def per_env_bytes(env, env_params) -> tuple[int, int]:
-    """(observation, state) bytes of one environment, from shapes only (nothing runs)."""
-    obs, state = jax.eval_shape(env.reset, jax.random.PRNGKey(0), env_params)
+    """(observation, state) bytes of one environment, from shapes only (nothing runs or
+    compiles: the key is made inside the traced function too)."""
+    obs, state = jax.eval_shape(lambda p: env.reset(jax.random.PRNGKey(0), p), env_params)
     return _bytes(obs), _bytes(state)
 
 

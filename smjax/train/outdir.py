@@ -45,10 +45,26 @@ class NothingToResumeError(OutDirError, FileNotFoundError):
     """``--resume`` of a directory that does not exist."""
 
 
+# bytes of one file or folder name (ext4, APFS, NTFS, ...; ``pathconf`` needs the folder
+# to exist, and a name too long makes every other check fail with ENAMETOOLONG)
+NAME_MAX = 255
+
+
+def check_path_names(flag: str, path: str | Path) -> None:
+    """Refuse a path with a name longer than ``NAME_MAX`` bytes, naming the flag."""
+    for part in Path(path).parts:
+        size = len(os.fsencode(part))
+        if size > NAME_MAX:
+            shown = part if len(part) <= 40 else f"{part[:40]}..."
+            raise OutDirError(f"{flag}: the name {shown!r} is {size} bytes long; a file or "
+                              f"folder name is at most {NAME_MAX} bytes")
+
+
 def check_out_dir(out: Path) -> None:
     """Refuse a path that can never hold a run: empty, a file, uncreatable, not writable."""
     if not str(out).strip():
         raise OutDirError("--out is empty (an unset shell variable?); name a directory")
+    check_path_names("--out", out)
     try:
         if out.exists() and not out.is_dir():
             raise OutDirError(f"--out {out} is a file, not a directory; choose a directory")

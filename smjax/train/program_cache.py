@@ -23,13 +23,13 @@ import hashlib
 import json
 import os
 import pickle
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import jax
 
 from smjax.core.timeline import TIMELINE
+from smjax.core.files import atomic_write_bytes
 
 _SETTINGS = ("jax_enable_x64", "jax_disable_most_optimizations", "jax_default_matmul_precision",
              "jax_default_prng_impl", "jax_threefry_partitionable")
@@ -139,11 +139,7 @@ def _save(path: Path, exported, out_tree) -> None:
     saving, never the run."""
     try:
         blob = pickle.dumps((bytes(exported.serialize()), out_tree))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-        with os.fdopen(fd, "wb") as f:
-            f.write(blob)
-        os.replace(tmp, path)
+        atomic_write_bytes(path, blob, durable=False)  # a lost entry is traced again
     except Exception:  # noqa: BLE001
         return
 

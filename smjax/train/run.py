@@ -16,13 +16,15 @@ from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_d
                                  resolve_config)
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
-from smjax.train.loop import HierarchyTrainer, NonFiniteError
+from smjax.train.loop import CHECKPOINT_FORMAT, HierarchyTrainer, NonFiniteError
 from smjax.train.program_cache import cacheable_identity
 from smjax.policy.artifact import policy_meta, write_policy
 from smjax.policy.hierarchies import declared_identity
-from smjax.train.plans import plan_levels, reachable_root_threshold, resolve_hierarchy
+from smjax.train.plans import (check_joint_learner, plan_levels, reachable_root_threshold,
+                               resolve_hierarchy, stage_count)
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
+from smjax.train.restorable import check_restorable
 from smjax.train.reward_probe import nonfinite_reward
 from smjax.train.results import ResultsError, build_results, write_results, write_sweep
 from smjax.train.seed_arrays import final_evaluation_keys
@@ -193,8 +195,13 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
     _check_checkpoint(out_dir, identity, resume, resume_from)
     plans = plan_levels(hierarchy, cfg.method)
     cfg.check_level_names([p.name for p in plans])
+    check_joint_learner(hierarchy, cfg, agent)
     slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
                              else (seeds, None, None))
+    # the checkpoint's files and host state, checked before the trainer compiles anything
+    checked = (check_restorable(out_dir, resume_from, len(slot_seeds),
+                                stage_count(hierarchy, plans, cfg), CHECKPOINT_FORMAT)
+               if resume else None)
     with TIMELINE.span("memory check, engine and trainer"):
         check_fits(env, env_params, cfg, len(slot_seeds))
         engine = Engine(env, env_params, hierarchy, agent, cfg)
@@ -207,7 +214,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
                       stacklevel=3)
     if resume:
         with TIMELINE.span("checkpoint restore"):
-            trainer.restore(resume_from)
+            trainer.restore(resume_from, checked)
     raw = _train(trainer, env, env_params, out_dir)
     raw["eval_keys"] = final_evaluation_keys(trainer.arrays.keys)
     extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides,

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import jax
-import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from smjax.core.overrides import INT32_MAX, parse_int
@@ -80,16 +80,19 @@ def make_params(
     goal = C.TASKS[C.check_task(task)]
     # strict: 0, -1 or 1.5 would truncate every step; 2**31 would overflow int32
     cap = C.STEP_CAP[goal] if max_steps is None else parse_int("max_steps", max_steps, 1, INT32_MAX)
+    # numpy, not jax.numpy: making a task runs no XLA program, so every refusal that
+    # follows (a config, a hierarchy, the memory estimate) comes before any compile; the
+    # arrays become device arrays where a program takes them
     if fixed_state is None:
-        grid = jnp.zeros((C.GRID_SIZE, C.GRID_SIZE), jnp.uint8)
-        pos, direction = jnp.zeros(2, jnp.int32), jnp.int32(C.DOWN)
+        grid = np.zeros((C.GRID_SIZE, C.GRID_SIZE), np.uint8)
+        pos, direction = np.zeros(2, np.int32), C.DOWN
     else:
         grid, pos, direction = fixed_state.grid, fixed_state.pos, fixed_state.direction
     return CraftParams(
-        max_steps=jnp.int32(cap),
-        goal=jnp.int32(C.KIND_ID[goal]),
-        use_fixed_map=jnp.asarray(fixed_state is not None),
-        fixed_grid=jnp.asarray(grid, jnp.uint8),
-        fixed_pos=jnp.asarray(pos, jnp.int32),
-        fixed_direction=jnp.asarray(direction, jnp.int32),
+        max_steps=np.asarray(cap, np.int32),
+        goal=np.asarray(C.KIND_ID[goal], np.int32),
+        use_fixed_map=np.asarray(fixed_state is not None),
+        fixed_grid=np.asarray(grid, np.uint8),
+        fixed_pos=np.asarray(pos, np.int32),
+        fixed_direction=np.asarray(direction, np.int32),
     )

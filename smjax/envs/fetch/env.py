@@ -16,6 +16,8 @@ controllers), ``scripted`` (the fully scripted hierarchy) and ``brax_adapter``.
 """
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -47,13 +49,25 @@ class FetchEnv(Environment[FetchState, FetchParams]):
         self.mj_model = fm.build_model(config.num_blocks, config.physics)
         self.index = fm.model_index(self.mj_model, config.num_blocks)
         self._check_layout()
-        self.mjx_model = mjx.put_model(self.mj_model, impl="jax")
-        self._data0 = mjx.make_data(self.mjx_model, impl="jax")
         lo = np.array(fm.GRIPPER_START, np.float32)
-        self._ws_low = jnp.asarray(
-            [lo[0] - fm.WORKSPACE_XY, lo[1] - fm.WORKSPACE_XY, fm.WORKSPACE_Z[0]], jnp.float32)
-        self._ws_high = jnp.asarray(
-            [lo[0] + fm.WORKSPACE_XY, lo[1] + fm.WORKSPACE_XY, fm.WORKSPACE_Z[1]], jnp.float32)
+        self._ws_low = np.asarray(
+            [lo[0] - fm.WORKSPACE_XY, lo[1] - fm.WORKSPACE_XY, fm.WORKSPACE_Z[0]], np.float32)
+        self._ws_high = np.asarray(
+            [lo[0] + fm.WORKSPACE_XY, lo[1] + fm.WORKSPACE_XY, fm.WORKSPACE_Z[1]], np.float32)
+
+    # The MJX model and its first data are made on first use, not with the env: putting
+    # them on the device runs XLA programs, and making a task must run none (every refusal
+    # that follows comes before any compile). Made eagerly even when first used inside a
+    # traced function, so that no tracer is kept.
+    @functools.cached_property
+    def mjx_model(self) -> mjx.Model:
+        with jax.ensure_compile_time_eval():
+            return mjx.put_model(self.mj_model, impl="jax")
+
+    @functools.cached_property
+    def _data0(self) -> mjx.Data:
+        with jax.ensure_compile_time_eval():
+            return mjx.make_data(self.mjx_model, impl="jax")
 
     def _check_layout(self) -> None:
         # types.py's accessors hard-code the qpos layout; fail loudly if the model drifts.
@@ -70,7 +84,7 @@ class FetchEnv(Environment[FetchState, FetchParams]):
     # ---- contract ------------------------------------------------------------
     @property
     def default_params(self) -> FetchParams:
-        return FetchParams(max_steps=jnp.asarray(50 * self.num_blocks, jnp.int32))
+        return FetchParams(max_steps=np.asarray(50 * self.num_blocks, np.int32))
 
     def action_space(self, params: FetchParams | None = None) -> spaces.Box:
         return spaces.Box(-1.0, 1.0, (4,), jnp.float32)
@@ -132,7 +146,7 @@ def make_fetch(
     params = env.default_params
     if max_steps is not None:
         steps = parse_int("max_steps", max_steps, 1, INT32_MAX)
-        params = params.replace(max_steps=jnp.asarray(steps, jnp.int32))
+        params = params.replace(max_steps=np.asarray(steps, np.int32))
     return env, params
 
 

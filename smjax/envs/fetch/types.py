@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 from mujoco import mjx
 
@@ -36,18 +37,19 @@ class FetchState:
 
 @struct.dataclass
 class FetchParams:
-    """Traced parameters (vmappable for sweeps); shapes never depend on them."""
+    """Traced parameters (vmappable for sweeps); shapes never depend on them. numpy by
+    default: making the task runs no XLA program (every refusal comes before a compile)."""
 
-    max_steps: jax.Array = struct.field(default_factory=lambda: jnp.asarray(150, jnp.int32))
-    action_scale: jax.Array = struct.field(default_factory=lambda: jnp.asarray(0.05, jnp.float32))
+    max_steps: jax.Array = struct.field(default_factory=lambda: np.asarray(150, np.int32))
+    action_scale: jax.Array = struct.field(default_factory=lambda: np.asarray(0.05, np.float32))
     success_distance: jax.Array = struct.field(
-        default_factory=lambda: jnp.asarray(0.04, jnp.float32))
-    clear_distance: jax.Array = struct.field(default_factory=lambda: jnp.asarray(0.08, jnp.float32))
-    spawn_range: jax.Array = struct.field(default_factory=lambda: jnp.asarray(0.15, jnp.float32))
+        default_factory=lambda: np.asarray(0.04, np.float32))
+    clear_distance: jax.Array = struct.field(default_factory=lambda: np.asarray(0.08, np.float32))
+    spawn_range: jax.Array = struct.field(default_factory=lambda: np.asarray(0.15, np.float32))
     min_gripper_distance: jax.Array = struct.field(
-        default_factory=lambda: jnp.asarray(0.1, jnp.float32))
+        default_factory=lambda: np.asarray(0.1, np.float32))
     min_block_distance: jax.Array = struct.field(
-        default_factory=lambda: jnp.asarray(0.055, jnp.float32))
+        default_factory=lambda: np.asarray(0.055, np.float32))
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from smjax.envs.football import constants as C
@@ -34,9 +35,10 @@ from smjax.envs.football.mirror import mirror_action
 from smjax.envs.football.noise import draw_noise
 from smjax.envs.football.types import FootballState, Noise, player_team, team_sign
 
+# numpy (see physics.DIRS): taken with jnp.asarray where used
 _DIRS8 = DIRS[1:]
-_FORM = jnp.asarray(C.FORMATION)
-_IS_GK = jnp.arange(C.NUM_PLAYERS) == C.GOALKEEPER
+_FORM = C.FORMATION
+_IS_GK = np.arange(C.NUM_PLAYERS) == C.GOALKEEPER
 
 
 _TAN_22_5 = 0.41421356
@@ -124,13 +126,13 @@ def carrier_plan(state: FootballState, view: TeamView, difficulty: jax.Array) ->
     to_goal = jnp.array([1.0, 0.0]) - me
     dist_goal = norm2(to_goal)
     goal_unit = to_goal / (dist_goal + 1e-9)
-    probe = me + 0.08 * _DIRS8                                     # [8, 2]
+    probe = me + 0.08 * jnp.asarray(_DIRS8)                                     # [8, 2]
     # Crowding of each probe point: a polynomial bump of radius 0.08 per opponent
     # (cheaper than a Gaussian and just as smooth where it matters).
     gap = probe[:, None] - opp[None]
     crowd = sum_axis(jnp.maximum(1.0 - (gap[..., 0] ** 2 + gap[..., 1] ** 2) / 0.08**2, 0.0) ** 2, 1)
     off_pitch = (jnp.abs(probe[:, 1]) > 0.39) | (probe[:, 0] > 0.97) | (probe[:, 0] < -0.97)
-    dribble_score = (dot2(_DIRS8, goal_unit) - 1.5 * crowd - 2.0 * off_pitch
+    dribble_score = (dot2(jnp.asarray(_DIRS8), goal_unit) - 1.5 * crowd - 2.0 * off_pitch
                      + n[:8, 2] * (1.0 - d) * 0.8)
     dribble_dir = (jnp.argmax(dribble_score) + 1).astype(jnp.int32)
 
@@ -140,7 +142,7 @@ def carrier_plan(state: FootballState, view: TeamView, difficulty: jax.Array) ->
     mark = own[:, None] - opp[None]
     openness = jnp.sqrt(min_axis(mark[..., 0] ** 2 + mark[..., 1] ** 2, 1))
     pass_score = (0.8 * mate_delta[:, 0] + 1.5 * jnp.minimum(openness, 0.12) - 0.5 * blockers
-                  - 0.6 * jnp.maximum(mate_dist - 0.6, 0.0) - 0.3 * _IS_GK
+                  - 0.6 * jnp.maximum(mate_dist - 0.6, 0.0) - 0.3 * jnp.asarray(_IS_GK)
                   - 10.0 * is_carrier - 10.0 * (mate_dist < 0.08) + n[:, 1] * (1.0 - d) * 0.5)
     best_pass = -min_axis(-pass_score, 0)
     pick_m = jnp.arange(C.NUM_PLAYERS) == jnp.argmax(pass_score)
@@ -195,10 +197,10 @@ def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tu
     # ---- off the ball: formation anchors, pressing, receiving, goalkeeping ----------
     # In possession the team stretches (forwards 0.25 ahead of the ball, wide wings);
     # without it the team sits compact between the ball and its own goal.
-    attack_x = ball[0] * 0.6 + 0.25 + _FORM[:, 0] * 0.7
-    defend_x = ball[0] * 0.5 - 0.2 + _FORM[:, 0] * 0.6
-    attack_y = _FORM[:, 1] * 1.6 + ball[1] * 0.2
-    defend_y = _FORM[:, 1] * 1.0 + ball[1] * 0.3
+    attack_x = ball[0] * 0.6 + 0.25 + jnp.asarray(_FORM)[:, 0] * 0.7
+    defend_x = ball[0] * 0.5 - 0.2 + jnp.asarray(_FORM)[:, 0] * 0.6
+    attack_y = jnp.asarray(_FORM)[:, 1] * 1.6 + ball[1] * 0.2
+    defend_y = jnp.asarray(_FORM)[:, 1] * 1.0 + ball[1] * 0.3
     anchor = jnp.stack([
         jnp.clip(jnp.where(we_have, attack_x, defend_x), -0.9, 0.85),
         jnp.clip(jnp.where(we_have, attack_y, defend_y), -0.38, 0.38),
@@ -206,13 +208,13 @@ def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tu
     gk_home = jnp.stack([-0.97, jnp.clip(ball[1] * 0.3, -0.035, 0.035)])
     anchor = anchor.at[C.GOALKEEPER].set(gk_home)
     d_ball = norm2(own - ball)
-    d_field = jnp.where(_IS_GK, 1e9, d_ball)
+    d_field = jnp.where(jnp.asarray(_IS_GK), 1e9, d_ball)
     rank = jnp.sum(d_field[None, :] < d_field[:, None], axis=1)
     n_press = jnp.where(they_have, 1 + jnp.floor(2.99 * d), jnp.where(loose, 1.0, 0.0))
-    chase = (rank < n_press) & ~_IS_GK
+    chase = (rank < n_press) & ~jnp.asarray(_IS_GK)
     chase = chase | (jnp.arange(C.NUM_PLAYERS) == receiver)
     ball_near_goal = (ball[0] < -0.75) & (jnp.abs(ball[1]) < 0.22)
-    chase = chase | (_IS_GK & ~we_have & ball_near_goal & (d_ball < 0.15))
+    chase = chase | (jnp.asarray(_IS_GK) & ~we_have & ball_near_goal & (d_ball < 0.15))
     chase_target = jnp.where(loose, ball_ahead, ball)
     target = jnp.where(chase[:, None], chase_target, anchor)
     to_target = target - own

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.core import spaces
 from smjax.core.overrides import INT32_MAX, parse_bool, parse_choice, parse_float, parse_int
@@ -47,10 +48,11 @@ class FootballEnv(Environment[FootballState, FootballParams]):
 
     @property
     def default_params(self) -> FootballParams:
-        return FootballParams(difficulty=jnp.float32(self._difficulty),
-                              teammate_difficulty=jnp.float32(0.95),
-                              checkpoint_reward=jnp.bool_(self._checkpoint_reward),
-                              max_steps=jnp.int32(self.game_length))
+        # numpy: making the task runs no XLA program (see craft's make_params)
+        return FootballParams(difficulty=np.asarray(self._difficulty, np.float32),
+                              teammate_difficulty=np.asarray(0.95, np.float32),
+                              checkpoint_reward=np.asarray(self._checkpoint_reward),
+                              max_steps=np.asarray(self.game_length, np.int32))
 
     def get_obs(self, state: FootballState, params: FootballParams | None = None) -> jax.Array:
         return observe(state, self.observation)

@@ -26,13 +26,15 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.envs.football import constants as C
 from smjax.envs.football.physics import norm2
 from smjax.envs.football.types import FootballState, player_team
 
 OBSERVATION_SIZES = {"simple115": 115, "paper": 139}
-_ROLES = jnp.asarray(C.ROLES, jnp.float32) / 9.0
+# numpy, so that importing runs no XLA program (see physics.DIRS)
+_ROLES = C.ROLES.astype(np.float32) / np.float32(9.0)
 
 
 def _owner_team_onehot(state: FootballState) -> jax.Array:

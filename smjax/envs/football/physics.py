@@ -28,7 +28,9 @@ import jax.numpy as jnp
 from smjax.envs.football import constants as C
 from smjax.envs.football.types import FootballState, Noise, player_team, team_sign
 
-DIRS = jnp.asarray(C.DIRECTION_VECTORS)
+# numpy, not jax.numpy: importing the package runs no XLA program (``smjax list``
+# and every refusal answer before any compile); each use takes it with jnp.asarray
+DIRS = C.DIRECTION_VECTORS
 
 
 # 2-vector helpers written out by component. A reduction over a trailing axis of size 2
@@ -79,7 +81,7 @@ def move_players(state: FootballState, sliding_now: jax.Array, frozen: jax.Array
     """Integrate player positions one step (sliding players lunge, frozen ones stand)."""
     idx = jnp.arange(C.NUM_TOTAL)
     is_carrier = idx == state.owner
-    dir_vec = DIRS[state.sticky_dir]
+    dir_vec = jnp.asarray(DIRS)[state.sticky_dir]
     speed = jnp.where(state.sprint, C.SPRINT_SPEED, C.RUN_SPEED)
     speed = jnp.where(state.dribble, C.DRIBBLE_SPEED, speed)
     speed = jnp.where(is_carrier, speed * C.CARRIER_SPEED_FACTOR, speed)
@@ -98,7 +100,7 @@ def move_players(state: FootballState, sliding_now: jax.Array, frozen: jax.Array
 
 def aim_direction(state: FootballState, player: jax.Array) -> jax.Array:
     """Unit vector a player aims along: his sticky direction, else his facing."""
-    sticky = DIRS[state.sticky_dir[player]]
+    sticky = jnp.asarray(DIRS)[state.sticky_dir[player]]
     has_dir = state.sticky_dir[player] > 0
     return jnp.where(has_dir, sticky, state.facing[player])
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.core.env import select_tree
 from smjax.envs.football import constants as C
@@ -43,10 +44,11 @@ from smjax.envs.football.physics import norm2
 from smjax.envs.football.reset import kickoff
 from smjax.envs.football.types import FootballState, Noise, player_team, team_sign
 
-_IDX = jnp.arange(C.NUM_TOTAL)
+# numpy (see physics.DIRS): taken with jnp.asarray where used
+_IDX = np.arange(C.NUM_TOTAL, dtype=np.int32)
 _TEAM_OF = _IDX // C.NUM_PLAYERS
 _IS_GK = (_IDX % C.NUM_PLAYERS) == C.GOALKEEPER
-_INF = jnp.float32(1e9)
+_INF = np.float32(1e9)
 
 
 def in_own_penalty_area(pos: jax.Array, team: jax.Array) -> jax.Array:
@@ -68,8 +70,8 @@ def _push_out(pos: jax.Array, centre: jax.Array, mask: jax.Array, radius: float,
 def apply_restart(state: FootballState, mode: jax.Array, team: jax.Array, spot: jax.Array) -> FootballState:
     """Set up a non-kick-off restart of ``mode`` for ``team`` with the ball at ``spot``."""
     sign = team_sign(team)
-    mine = _TEAM_OF == team
-    may_take = jnp.where(mode == C.GOAL_KICK, mine & _IS_GK, mine & ~_IS_GK)
+    mine = jnp.asarray(_TEAM_OF) == team
+    may_take = jnp.where(mode == C.GOAL_KICK, mine & jnp.asarray(_IS_GK), mine & ~jnp.asarray(_IS_GK))
     dist = norm2(state.pos - spot)
     taker = jnp.argmin(jnp.where(may_take, dist, _INF)).astype(jnp.int32)
     look_at = jnp.where(mode == C.PENALTY, jnp.stack([sign, 0.0]), jnp.stack([sign * 0.5, 0.0]))
@@ -118,7 +120,7 @@ def _tackles(state: FootballState, sliding_now: jax.Array, in_restart: jax.Array
     """Standing and sliding tackles on the carrier. Returns (state, foul)."""
     owner = jnp.maximum(state.owner, 0)
     carried = (state.owner >= 0) & ~in_restart
-    opponent = _TEAM_OF != player_team(owner)
+    opponent = jnp.asarray(_TEAM_OF) != player_team(owner)
     dist = norm2(state.pos - state.ball_pos[:2])
     able = (state.cooldown == 0) & ((state.stun == 0) | sliding_now)
     standing = carried & opponent & able & ~sliding_now & (dist < C.TACKLE_RADIUS)
@@ -141,7 +143,7 @@ def _control(state: FootballState, prev_ball: jax.Array, noise: Noise) -> Footba
     loose = state.owner < 0
     path_dist = physics.segment_distance(state.pos, prev_ball[:2], state.ball_pos[:2])
     low_z = jnp.minimum(prev_ball[2], state.ball_pos[2])
-    keeper_hands = _IS_GK & in_own_penalty_area(state.pos, _TEAM_OF)
+    keeper_hands = jnp.asarray(_IS_GK) & in_own_penalty_area(state.pos, jnp.asarray(_TEAM_OF))
     radius = jnp.where(keeper_hands, C.GK_CONTROL_RADIUS, C.CONTROL_RADIUS)
     height = jnp.where(keeper_hands, C.GK_CONTROL_HEIGHT, C.CONTROL_HEIGHT)
     speed = norm2(state.ball_vel[:2])
@@ -153,8 +155,8 @@ def _control(state: FootballState, prev_ball: jax.Array, noise: Noise) -> Footba
     # A keeper who catches the ball gathers it facing the play: the controlled ball sits
     # BALL_OFFSET in front of its holder, so a keeper backing onto his line while
     # facing his own goal would otherwise hold it over the line (a goal he saved).
-    keeper_catch = jnp.any(reach & keeper_hands & (_IDX == winner))
-    to_field = jnp.stack([team_sign(_TEAM_OF[winner]), 0.0])
+    keeper_catch = jnp.any(reach & keeper_hands & (jnp.asarray(_IDX) == winner))
+    to_field = jnp.stack([team_sign(jnp.asarray(_TEAM_OF)[winner]), 0.0])
     facing = jnp.where(keeper_catch, state.facing.at[winner].set(to_field), state.facing)
     after = state.replace(
         owner=winner, last_touch=winner, pass_receiver=jnp.int32(-1),
@@ -228,9 +230,9 @@ def step_game(state: FootballState, actions: jax.Array, noise: Noise) -> tuple[F
     state = physics.apply_sticky(state, actions)
     state, kicked = _kick(state, actions, noise)
     in_restart = in_restart & ~kicked
-    sliding_now = (actions == C.SLIDING) & (state.stun == 0) & (_IDX != state.owner) & ~in_restart
+    sliding_now = (actions == C.SLIDING) & (state.stun == 0) & (jnp.asarray(_IDX) != state.owner) & ~in_restart
     state = state.replace(stun=jnp.where(sliding_now, C.SLIDE_STUN, state.stun))
-    frozen = in_restart & (_IDX == state.owner)
+    frozen = in_restart & (jnp.asarray(_IDX) == state.owner)
     state = physics.move_players(state, sliding_now, frozen)
 
     prev_ball = state.ball_pos
@@ -240,7 +242,7 @@ def step_game(state: FootballState, actions: jax.Array, noise: Noise) -> tuple[F
                           ball_vel=jnp.where(loose, flown_vel, state.ball_vel))
     state = _attach_ball(state)
     # During a restart the opponents are held away from the ball.
-    held = _push_out(state.pos, state.ball_pos[:2], _TEAM_OF != player_team(jnp.maximum(state.owner, 0)),
+    held = _push_out(state.pos, state.ball_pos[:2], jnp.asarray(_TEAM_OF) != player_team(jnp.maximum(state.owner, 0)),
                      C.RESTART_CLEARANCE, jnp.zeros((2,)))
     state = state.replace(pos=jnp.where(in_restart & (state.owner >= 0), held, state.pos))
     state, foul = _tackles(state, sliding_now, in_restart, noise)

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.envs.football import constants as C
 from smjax.envs.football.builtin_ai import lane_blockers, quantize_direction
@@ -44,7 +45,8 @@ from smjax.envs.football.types import FootballState
 from smjax.options import OptionTemplate, declare
 
 K_MAX = 200
-GOAL = jnp.array([1.0, 0.0])
+# numpy, so that importing runs no XLA program (see physics.DIRS)
+GOAL = np.array([1.0, 0.0], np.float32)
 _N = C.NUM_PLAYERS
 _DIRS8 = DIRS[1:]
 
@@ -98,7 +100,7 @@ def _with_ball_only(state: FootballState, actions: jax.Array) -> jax.Array:
 # ---- controllers -------------------------------------------------------------
 def charge_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
     c = _carrier(state)
-    direction = quantize_direction(GOAL - state.pos[c])
+    direction = quantize_direction(jnp.asarray(GOAL) - state.pos[c])
     return _with_ball_only(state, _only(c, steer(state, c, direction, jnp.bool_(True))))
 
 
@@ -128,10 +130,10 @@ def possession_actions(state: FootballState) -> jax.Array:
     along = dot2(rel[:, None, :], _DIRS8[None])            # [11 opp, 8 dirs]
     across = jnp.sqrt(jnp.maximum(dot2(rel, rel)[:, None] - along**2, 0.0))
     blocked = jnp.any((along > 0.0) & (along < FREE_LOOKAHEAD) & (across < along * 0.577), axis=0)
-    probe = me + 0.1 * _DIRS8
+    probe = me + 0.1 * jnp.asarray(_DIRS8)
     on_pitch = (jnp.abs(probe[:, 1]) < 0.4) & (jnp.abs(probe[:, 0]) < 0.98)
-    goal_unit = (GOAL - me) / (norm2(GOAL - me) + 1e-9)
-    gain = dot2(_DIRS8, goal_unit)
+    goal_unit = (jnp.asarray(GOAL) - me) / (norm2(jnp.asarray(GOAL) - me) + 1e-9)
+    gain = dot2(jnp.asarray(_DIRS8), goal_unit)
     free = ~blocked & on_pitch & (gain > FREE_MIN_GAIN)
     best_free = (jnp.argmax(jnp.where(free, gain, -10.0)) + 1).astype(jnp.int32)
 
@@ -174,7 +176,7 @@ def maintain_possession_controller(key: jax.Array, state: FootballState, params)
 
 def attack_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
     c = _carrier(state)
-    x, dist_goal = state.pos[c, 0], norm2(state.pos[c] - GOAL)
+    x, dist_goal = state.pos[c, 0], norm2(state.pos[c] - jnp.asarray(GOAL))
     shoot = shoot_controller(key, state, params)
     charge = charge_controller(key, state, params)
     keep = possession_actions(state)
@@ -213,7 +215,7 @@ def possession_failed(state: FootballState, params) -> jax.Array:
 
 
 def charge_satisfied(state: FootballState, params) -> jax.Array:
-    near = norm2(state.pos[_carrier(state)] - GOAL) <= 0.3
+    near = norm2(state.pos[_carrier(state)] - jnp.asarray(GOAL)) <= 0.3
     return left_controls(state) & near
 
 
