@@ -73,6 +73,13 @@ class Environment(Generic[TEnvState, TEnvParams]):
     #: residuals on quantities near zero (MJX accelerations at rest) need a larger atol.
     contract_tolerances: tuple[float, float] | None = None
 
+    def contract_state(self, state: TEnvState) -> Any:
+        """The part of ``state`` on which two programs computing the same step (jit vs
+        eager, vmap vs loop) must agree, for ``smjax.testing``: all of it unless an
+        environment holds quantities that amplify float32 rounding (a physics engine's
+        forces and accelerations) beside the state that determines them."""
+        return state
+
     # ---- to implement -------------------------------------------------
     @property
     def default_params(self) -> TEnvParams:
