@@ -69,8 +69,8 @@ class Environment(Generic[TEnvState, TEnvParams]):
     #: state): ``step`` then passes its key to ``step_env`` unsplit (see the module docstring).
     reset_ignores_key: bool = False
     #: ``(rtol, atol)`` within which floats of two programs computing the same step (jit vs
-    #: eager, vmap vs loop) agree; None: ``smjax.testing``'s defaults. A physics solver's
-    #: residuals on quantities near zero (MJX accelerations at rest) need a larger atol.
+    #: eager, vmap vs loop) agree; None: ``smjax.testing``'s defaults. A physics solver run
+    #: for a few iterations leaves larger differences (Fetch's velocities: ~1e-5).
     contract_tolerances: tuple[float, float] | None = None
 
     def contract_state(self, state: TEnvState) -> Any:
