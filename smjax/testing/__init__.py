@@ -32,7 +32,9 @@ action space).
 Floats computed by two different programs (jit vs eager, vmap vs loop) are compared with
 ``RTOL``/``ATOL`` (or the ``rtol``/``atol`` a check is given, else the environment's
 ``contract_tolerances``): XLA fuses them differently,
-which changes float32 rounding; integer and bool leaves must be equal.
+which changes float32 rounding; integer and bool leaves must be equal. Of a state, those
+comparisons see what ``env.contract_state`` returns (all of it by default; Fetch leaves
+out MJX's forces and accelerations, which amplify rounding in the positions they follow).
 """
 from smjax.testing.compare import ATOL, RTOL, assert_trees_close, tolerances, trees_mismatch
 from smjax.testing.env_contract import check_env

@@ -77,6 +77,18 @@ def _make_one_env(env) -> Callable:
     return jax.jit(one)
 
 
+def compared_state(env, state: Any) -> Any:
+    """``state`` cut to what two programs must agree on (``Environment.contract_state``;
+    the whole state for an environment without it)."""
+    view = getattr(env, "contract_state", None)
+    return state if view is None else view(state)
+
+
+def compared(env, out: tuple) -> tuple:
+    """``(obs, state, ...)`` with its state as ``compared_state`` cuts it."""
+    return (out[0], compared_state(env, out[1]), *out[2:])
+
+
 def env_tolerances(env, rtol: float | None, atol: float | None) -> tuple[float, float]:
     """The tolerances given, else those the environment declares, else the defaults."""
     declared = getattr(env, "contract_tolerances", None) or (RTOL, ATOL)
@@ -115,9 +127,11 @@ def check_jit_eager(env, params, key, act_space, one, who: str) -> None:
         action = act_space.sample(key_act)
         jitted = one(key_reset, key_step, state, action, params)
         if t == 0:
-            assert_trees_close(jitted["reset"], eager, prop="jit == eager", who=who, where="reset")
+            assert_trees_close(compared(env, jitted["reset"]), compared(env, eager),
+                               prop="jit == eager", who=who, where="reset")
         eager = env.step(key_step, state, action, params)
-        assert_trees_close(jitted["step"], eager, prop="jit == eager", who=who, where=f"step {t}")
+        assert_trees_close(compared(env, jitted["step"]), compared(env, eager),
+                           prop="jit == eager", who=who, where=f"step {t}")
         state = eager[1]
 
 
@@ -172,7 +186,7 @@ def check_rewards(traj, who: str) -> None:
              f"({int((~finite).sum())} of {finite.size} rewards are non-finite)")
 
 
-def check_vmap_loop(params, key_roll, rollout_out, one, times, who: str) -> None:
+def check_vmap_loop(env, params, key_roll, rollout_out, one, times, who: str) -> None:
     """The batched rollout, env by env, equals single-environment reset and steps."""
     (reset_obs, reset_state), (states, actions, keys, out) = rollout_out
     num_envs = actions.shape[1]
@@ -181,10 +195,11 @@ def check_vmap_loop(params, key_roll, rollout_out, one, times, who: str) -> None
         for i in range(num_envs):
             single = one(reset_keys[i], keys[t, i], index(states, t, i), actions[t, i], params)
             if t == times[0]:
-                assert_trees_close(single["reset"], index((reset_obs, reset_state), i),
+                assert_trees_close(compared(env, single["reset"]),
+                                   compared(env, index((reset_obs, reset_state), i)),
                                    prop="vmap == loop", who=who, where=f"reset, env {i}")
-            assert_trees_close(single["step"], index(out, t, i), prop="vmap == loop", who=who,
-                               where=f"step {t}, env {i}")
+            assert_trees_close(compared(env, single["step"]), compared(env, index(out, t, i)),
+                               prop="vmap == loop", who=who, where=f"step {t}, env {i}")
 
 
 def check_auto_reset(env, params, traj, one, who: str, max_checks: int = 4) -> None:
@@ -200,7 +215,8 @@ def check_auto_reset(env, params, traj, one, who: str, max_checks: int = 4) -> N
     for t, i in np.argwhere(done)[:max_checks]:
         key, s, a = keys[t, i], index(states, t, i), actions[t, i]
         single = one(jax.random.split(key)[1], key, s, a, params)
-        assert_trees_close((index(obs, t, i), index(state, t, i)), single["reset"],
+        assert_trees_close(compared(env, (index(obs, t, i), index(state, t, i))),
+                           compared(env, single["reset"]),
                            prop="auto-reset", who=who, where=f"step {t}, env {i} (episode "
                            f"ended): the returned observation/state is not reset_env's")
         got = index(final, t, i)
@@ -273,7 +289,7 @@ def _check_env(env, params, num_envs: int, steps: int, key, render: bool) -> Non
                        exact=True, where="two rollouts with the same key")
     check_observations(reset_obs, traj, obs_space, who)
     check_rewards(traj, who)
-    check_vmap_loop(params, key_roll, first, one, _spread(steps), who)
+    check_vmap_loop(env, params, key_roll, first, one, _spread(steps), who)
     if not _any_done(traj):
         short = short_params(params, steps)
         if short is None:

@@ -25,7 +25,7 @@ from smjax.options.template import OptionTemplate
 from smjax.testing.compare import (
     all_equal, assert_trees_close, fail, index, tolerances,
 )
-from smjax.testing.env_contract import env_tolerances, make_rollout
+from smjax.testing.env_contract import compared_state, env_tolerances, make_rollout
 
 PREDICATES = ("initiation", "satisfied", "failed")
 
@@ -63,6 +63,12 @@ def _template_fn(env, tpl: OptionTemplate, params) -> Callable:
         return out
 
     return evaluate
+
+
+def _compared(env, out: dict) -> dict:
+    """``out`` with its states cut to what two programs must agree on (as check_env)."""
+    return {k: compared_state(env, v) if k in ("teleport_state", "teleport_outcome") else v
+            for k, v in out.items()}
 
 
 def _check_outputs(out: dict, count: int, act_shape: tuple, who: str) -> None:
@@ -121,8 +127,9 @@ def check_template(env, params, tpl: OptionTemplate, states, key, who: str,
     _check_outputs(out, count, tuple(act_space.shape), who)
     one = jax.jit(evaluate)
     for i in range(min(loop_states, count)):
-        assert_trees_close(one(keys[i], index(states, i)), index(out, i), prop="vmap == loop",
-                           who=who, where=f"state {i}")
+        assert_trees_close(_compared(env, one(keys[i], index(states, i))),
+                           _compared(env, index(out, i)), prop="vmap == loop", who=who,
+                           where=f"state {i}")
     _check_actions(out, act_space, who)
     _check_teleport_outcome(out, who)
     return out
