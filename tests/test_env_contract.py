@@ -318,7 +318,8 @@ def test_spaces_contain():
 @pytest.mark.parametrize("task", ["craft/get_wood", "craft/make_stick", "craft/get_gem",
                                   "football/11v11_easy"])
 def test_registered_environments_pass_the_harness_with_its_defaults(task):
-    """What a user runs first: every argument left at its default (Fetch: see above)."""
+    """What a user runs first: every argument left at its default (Fetch: in
+    test_fetch_render_brax.py, which skips it without OpenGL)."""
     env, params = smjax.make(task)
     check_env(env, params)
     for name in env.hierarchies():

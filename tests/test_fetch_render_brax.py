@@ -1,4 +1,5 @@
-"""Fetch & Stack rendering (skipped without an OpenGL backend) and the Brax adapter.
+"""Fetch & Stack rendering and the harness with its defaults (both skipped without an OpenGL
+backend), and the Brax adapter.
 
 MuJoCo picks its GL backend when it is first imported: this file defaults MUJOCO_GL to
 egl, which only takes effect if no earlier test module imported mujoco. Run the suite
@@ -100,3 +101,18 @@ def test_brax_ppo_trains_on_fetch():
     assert seen and seen[-1] >= 64
     assert np.isfinite(float(metrics["eval/episode_reward"]))
     assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(params))
+
+
+@pytest.mark.slow  # MJX on a CPU: ~6 min on 2 cores, 17 min when others share them
+def test_fetch_passes_the_harness_with_its_defaults():
+    """check_env and check_hierarchy with every argument left at its default (render too,
+    hence here, where a machine without OpenGL skips it)."""
+    ok, why = _gl_available()
+    if not ok:
+        pytest.skip(why)
+    from smjax.testing import check_env, check_hierarchy
+
+    env, params = smjax.make("fetch/stack3")
+    check_env(env, params)
+    for name in env.hierarchies():
+        check_hierarchy(env, params, name)
