@@ -85,7 +85,7 @@ def test_device_put_replicated_is_defined_for_brax_where_jax_lacks_it():
     assert {d for s in out["w"].addressable_shards for d in [s.device]} == set(devices)
 
 
-@pytest.mark.slow  # MJX compiles slowly on a CPU: minutes on 2 cores
+@pytest.mark.slow  # MJX compiles slowly on a CPU: ~7 min on 2 shared cores
 def test_brax_ppo_trains_on_fetch():
     """Brax's own PPO trainer, for a couple of tiny updates, on BraxFetchEnv."""
     pytest.importorskip("brax")
