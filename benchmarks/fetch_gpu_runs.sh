@@ -14,9 +14,9 @@
 # (MODE=status) show progress and copy results to $OUT. MODE=run trains in the
 # foreground, resuming checkpointed runs under runs/gpu (T: time limit per run, seconds).
 #
-# Caution (eleventh session): a detached run did not survive between two calls: the second call,
-# started seconds after the first returned its files, found a fresh machine. Plan each call to
-# end with what it needs to continue (HOP=1) rather than relying on the machine staying up.
+# Caution: a detached run need not survive between two calls (a call may find a fresh
+# machine), so each call ends with what it needs to continue (HOP=1) rather than relying on
+# the machine staying up.
 #
 # A run longer than one machine (4-block top-down: ~35 min) moves to the next machine at a
 # level boundary. Runs here checkpoint only there (checkpoint_every=1e9), where the checkpoint

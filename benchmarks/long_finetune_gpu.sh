@@ -4,8 +4,8 @@
 #   bash benchmarks/long_finetune_gpu.sh "NAME TASK [train flags...]" ...
 # T (default 540) seconds per call; RESUME=1 to continue. Each run's results.json lands
 # in $OUT as NAME.json (its curves as NAME.csv) once finished, its log as log_NAME.txt
-# (appended per call). The device tool returns only a few files from $OUT (six runs' 18 lost
-# ten of them in the twentieth session), so at the end they are packed into $OUT/runs.tgz.
+# (appended per call). Hosts that return only a few files from $OUT lose some of six runs'
+# 18, so at the end they are packed into $OUT/runs.tgz.
 set -u
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/runs
 export XLA_PYTHON_CLIENT_MEM_FRACTION=${XLA_PYTHON_CLIENT_MEM_FRACTION:-$(python3 -c "print(round(0.9 / $#, 3))")}
