@@ -38,7 +38,8 @@ def test_difficulty_is_a_traced_param_that_vmaps():
 
     positions = jax.jit(jax.vmap(run, in_axes=(jax.tree.map(lambda _: 0, sweep)
                                                .replace(teammate_difficulty=None,
-                                                        checkpoint_reward=None),)))(sweep)
+                                                        checkpoint_reward=None,
+                                                        max_steps=None),)))(sweep)
     positions = np.asarray(positions)
     assert positions.shape == (3, 20, 22, 2)
     # Different opponent difficulty, different opponent play.
