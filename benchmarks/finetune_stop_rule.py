@@ -22,7 +22,7 @@ import statistics
 from collections import defaultdict
 
 
-def replay(block_means: list[float], stop: str, episodes: int, block: int, gain: float):
+def replay(block_means: list[float], episodes: int, block: int, gain: float):
     """(episodes, last block mean) of one seed's phase under ``gain``; ``None`` as the mean
     when the phase ended before its first block."""
     for k in range(1, len(block_means)):
@@ -32,11 +32,11 @@ def replay(block_means: list[float], stop: str, episodes: int, block: int, gain:
 
 
 def seeds_of(path: str):
-    """(task, block size, used gain, [(block_means, stop, episodes)]) of one results file."""
+    """(task, block size, used gain, [(block_means, episodes)]) of one results file."""
     with open(path) as f:
         res = json.load(f)
     ft, cfg = res["finetune"], res["config"]
-    rows = list(zip(ft["block_means"], ft["stop"], ft["episodes"]))
+    rows = list(zip(ft["block_means"], ft["episodes"]))
     return res["task"], cfg["finetune_plateau_episodes"], cfg["finetune_plateau_gain"], rows
 
 
@@ -50,7 +50,7 @@ def table(paths: list[str], gains: list[float]) -> list[dict]:
         for gain in gains:
             if gain < used:
                 continue
-            replayed = [replay(bm, stop, eps, block, gain) for bm, stop, eps in rows]
+            replayed = [replay(bm, eps, block, gain) for bm, eps in rows]
             means = [m for _, m in replayed if m is not None]
             out.append({"task": task, "block": block, "gain": gain, "seeds": len(rows),
                         "episodes": statistics.mean(e for e, _ in replayed),
