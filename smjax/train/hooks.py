@@ -2,7 +2,7 @@
 
 After every chunk the loop hands each hook a ``ChunkReport`` (the scalars the stages
 logged, where every seed stands, whether a level, turn or phase ended), in the spirit of
-Brax's ``progress_fn``: the library itself writes and prints nothing, its hooks do. The
+Brax's ``progress_fn``: the loop itself writes and prints nothing, its hooks do. The
 hooks here: TensorBoard (``TensorBoardHook``) and checkpoints (``CheckpointHook``, which
 also restores them); the progress bar is :class:`smjax.train.progress.ProgressBar`.
 """

@@ -20,6 +20,7 @@ for bit.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -49,8 +50,6 @@ def default_hooks(cfg, out_dir, progress: bool, run_meta: dict) -> list[Hook]:
     writer = dist.is_writer()  # process 0: the only one that writes files or draws bars
     hooks: list[Hook] = [ProgressBar()] if progress and writer else []
     if cfg.tensorboard and out_dir is not None and writer:
-        from pathlib import Path
-
         hooks.append(TensorBoardHook(Path(out_dir) / "tensorboard"))
     if out_dir is not None:
         hooks.append(CheckpointHook(out_dir, cfg, run_meta or {}))
