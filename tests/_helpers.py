@@ -6,7 +6,7 @@ from pathlib import Path
 
 import jax
 
-from smjax.train.loop import HierarchyTrainer
+from smjax.train.hooks import CheckpointHook
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
@@ -25,14 +25,14 @@ class MachineLost(Exception):
 
 def lose_machine_after_save(monkeypatch, when) -> None:
     """Make every checkpoint save raise ``MachineLost`` once written, if ``when(trainer)``."""
-    save = HierarchyTrainer.save
+    save = CheckpointHook.save
 
-    def save_then_lose_the_machine(trainer):
-        save(trainer)
+    def save_then_lose_the_machine(hook, trainer):
+        save(hook, trainer)
         if when(trainer):
             raise MachineLost
 
-    monkeypatch.setattr(HierarchyTrainer, "save", save_then_lose_the_machine)
+    monkeypatch.setattr(CheckpointHook, "save", save_then_lose_the_machine)
 
 
 # the keep-the-better counters that checkpoint format 4 added to the host state

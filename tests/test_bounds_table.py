@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from _helpers import cli_answer
-from smjax.cli import main
 from smjax.train import TrainConfig
 from smjax.train.config import ConfigError, read_config_file
 

@@ -129,7 +129,7 @@ def test_a_failed_evaluation_keeps_the_trained_state_and_results_follow_on_resum
         raise RuntimeError("evaluation failed")
 
     with monkeypatch.context() as m:
-        m.setattr(HierarchyTrainer, "_evaluate", broken)
+        m.setattr(HierarchyTrainer, "evaluate", broken)
         with pytest.raises(RuntimeError, match="evaluation failed"):
             run(make_keydoor(), cfg, [0], out, progress=False)
     assert ckpt.load_meta(out)["meta"]["trained"] and not (out / "results.json").exists()

@@ -9,7 +9,6 @@ os.environ.setdefault("JAX_PLATFORMS", "cpu")
 import pytest
 
 from _helpers import cli_answer
-from smjax.cli import main
 
 
 def test_list_with_an_unknown_prefix_is_an_error(capsys):

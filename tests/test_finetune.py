@@ -114,19 +114,19 @@ def _banks_equal(a, b) -> bool:
 def _record_levels_bank(monkeypatch, before: float) -> list:
     """Force final_success_before to ``before``; the returned list receives the levels'
     bank as fine-tuning starts."""
-    from smjax.train.finetune import FinetunePhase
+    from smjax.train.finetune import FinetuneStage
 
     levels_banks = []
-    real = FinetunePhase._evaluate_before
+    real = FinetuneStage.enter
 
-    def evaluate_before(self, seeds):
-        real(self, seeds)
+    def enter(self, st, seeds):
+        real(self, st, seeds)
         for s in seeds:
-            self.state.finetune[s].success_before = before
+            st.finetune[s].success_before = before
         if seeds:
-            levels_banks.append(jax.tree.map(np.asarray, self.arrays.bank))
+            levels_banks.append(jax.tree.map(np.asarray, self.slots.arrays.bank))
 
-    monkeypatch.setattr(FinetunePhase, "_evaluate_before", evaluate_before)
+    monkeypatch.setattr(FinetuneStage, "enter", enter)
     return levels_banks
 
 
@@ -170,7 +170,7 @@ def test_without_finetuning_the_counts_are_the_levels():
 
 
 def _in_a_second_turn(trainer) -> bool:
-    return any(trainer._finetuning(s) and trainer.state.finetune[s].turn >= 1
+    return any(trainer.finetuning(s) and trainer.state.finetune[s].turn >= 1
                for s in range(len(trainer.seeds)))
 
 
@@ -218,16 +218,16 @@ def test_a_new_turn_goes_on_with_the_episodes_in_flight(monkeypatch, go_on):
     # a later turn hands the same episodes to its learner (the old learner's pending
     # decision and episode record cleared); off, every turn starts fresh episodes
     from smjax.train.loop import HierarchyTrainer
-    start, seen = HierarchyTrainer._start_levels, []
+    start, seen = HierarchyTrainer.start, []
 
     def spy(self, seeds):
-        later = [s for s in seeds if self._finetuning(s) and self.state.finetune[s].turns]
+        later = [s for s in seeds if self.finetuning(s) and self.state.finetune[s].turns]
         before = jax.tree.map(np.asarray, self.arrays.state.carry)
         start(self, seeds)
         if later:
             seen.append((later, before, jax.tree.map(np.asarray, self.arrays.state.carry)))
 
-    monkeypatch.setattr(HierarchyTrainer, "_start_levels", spy)
+    monkeypatch.setattr(HierarchyTrainer, "start", spy)
     cfg = TrainConfig(**(SMALL | {"finetune_threshold": 1.0, "finetune_max_episodes": 300,
                                   "finetune_continue_episodes": go_on}))
     run(make_keydoor(), cfg, [0, 1], progress=False)
@@ -247,7 +247,7 @@ def test_a_new_turn_goes_on_with_the_episodes_in_flight(monkeypatch, go_on):
 @settings(max_examples=200, deadline=None)
 @given(st.integers(1, 5), st.integers(0, 4), st.data())
 def test_converged_options_rest_at_most_max_rest_turns_in_a_row(num_options, max_rest, data):
-    from smjax.train.finetune import next_turn
+    from smjax.train.finetune_ops import next_turn
 
     order = [f"o{i}" for i in range(num_options)]
     success = st.one_of(st.none(), st.floats(0, 1))

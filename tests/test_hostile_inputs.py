@@ -35,7 +35,7 @@ from smjax.core.registry import get_entry
 from smjax.train import TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.config import ConfigError
-from smjax.train.outdir import LOCK_NAME, DirLock, OutDirError, prepare_out_dir
+from smjax.train.outdir import LOCK_NAME, OutDirError, prepare_out_dir
 from smjax.train.run import run
 
 TINY = dict(num_envs=8, rollout_ticks=8, updates_per_chunk=2, max_episodes_per_level=300,

@@ -182,22 +182,26 @@ def test_joint_finetuning_keeps_each_levels_discount():
                                plan_levels(h, "top-down"), [0], progress=False)
     want = [0.95] * h.num_options
     want[root.option], want[below[0].option] = 0.99, 0.5
-    assert trainer._option_gammas(0) == want
+    assert trainer.finetune.option_gammas(0) == want
 
 
 def _in_the_joint_phase(trainer) -> bool:
-    return any(trainer._finetuning(s) and trainer.state.finetune[s].episodes > 0
+    return any(trainer.finetuning(s) and trainer.state.finetune[s].episodes > 0
                for s in range(len(trainer.seeds)))
 
 
 def test_resume_during_joint_finetuning_is_exact(tmp_path, monkeypatch):
-    from smjax.train.loop import HierarchyTrainer
+    from smjax.train.hooks import CheckpointHook
 
     cfg = TrainConfig(**(JOINT_SMALL | {"checkpoint_every": 1e9, "finetune_threshold": 1.0}))
     straight = run(make_keydoor(), cfg, [0, 1], progress=False)
     # saves at level ends, then once inside the joint phase (there it has no boundary of
     # its own), where the machine is lost
-    monkeypatch.setattr(HierarchyTrainer, "_save_due", _in_the_joint_phase)
+    def save_in_the_joint_phase(hook, trainer, report):
+        if report.stage_ended or _in_the_joint_phase(trainer):
+            hook.save(trainer)
+
+    monkeypatch.setattr(CheckpointHook, "chunk", save_in_the_joint_phase)
     lose_machine_after_save(monkeypatch, _in_the_joint_phase)
     out = tmp_path / "moved"
     with pytest.raises(MachineLost):
@@ -237,16 +241,16 @@ def test_a_hierarchy_that_passes_before_the_phase_is_not_fine_tuned(monkeypatch)
     # the evaluation before the phase is its first gate: at a threshold the levels'
     # hierarchy already passes (KeyDoor's SMALL levels leave it at ~0.3-0.4), no episode is
     # fine-tuned and the levels' bank is handed back untouched
-    from smjax.train.finetune import FinetunePhase
+    from smjax.train.finetune import FinetuneStage
 
-    banks, real = [], FinetunePhase._evaluate_before
+    banks, real = [], FinetuneStage.enter
 
-    def evaluate_before(self, seeds):  # and keep the bank as the levels left it
-        real(self, seeds)
+    def enter(self, st, seeds):  # and keep the bank as the levels left it
+        real(self, st, seeds)
         if seeds:
-            banks.append(jax.tree.map(np.asarray, self.arrays.bank))
+            banks.append(jax.tree.map(np.asarray, self.slots.arrays.bank))
 
-    monkeypatch.setattr(FinetunePhase, "_evaluate_before", evaluate_before)
+    monkeypatch.setattr(FinetuneStage, "enter", enter)
     res = run(make_keydoor(), TrainConfig(**(JOINT_SMALL | {"finetune_threshold": 0.05})),
               [0, 1], progress=False)
     ft = res["finetune"]

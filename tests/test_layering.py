@@ -234,14 +234,7 @@ def _package(path: Path) -> str:
     return "benchmarks"
 
 
-# the progress bar reads the trainer's private methods (which live in train/loop.py); the
-# trainer's stages are to hand it public events
-KNOWN = {"smjax/train/progress.py": "reads HierarchyTrainer._training, _plan, ... of loop.py"}
-
-
-@pytest.mark.parametrize("path", [
-    pytest.param(p, marks=pytest.mark.xfail(strict=True, reason=KNOWN[_short(p)]))
-    if _short(p) in KNOWN else p for p in SCANNED], ids=_short)
+@pytest.mark.parametrize("path", SCANNED, ids=_short)
 def test_no_private_names_across_modules(path):
     bad = private_uses(path.read_text(), _package(path), str(path))
     assert not bad, f"{_short(path)} uses private names of other modules: " + "; ".join(bad)

@@ -5,14 +5,12 @@ from __future__ import annotations
 
 import os
 import time
-from pathlib import Path
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 
 import pytest
 
 from _helpers import cli_answer
-from smjax.cli import main
 from smjax.train.outdir import LOCK_NAME, OutDirError, RunExistsError, prepare_out_dir
 
 

@@ -6,43 +6,30 @@ import pytest
 
 pytest.importorskip("tqdm")
 
-from smjax.train.progress import Progress  # noqa: E402
-
-
-class _Trainer:
-    """Two seeds, three levels and fine-tuning: seed 0 at level 2, seed 1 fine-tuning."""
-
-    def __init__(self):
-        self.seeds = [0, 1]
-        self.plans = [SimpleNamespace(level=i) for i in (1, 2, 3)]
-        self.num_stages = 4
-        self.cfg = SimpleNamespace(updates_per_chunk=1, num_envs=4, rollout_ticks=8)
-        counters = SimpleNamespace(running=0.5, gate_success=None, episodes=10, env_steps=80)
-        ft = SimpleNamespace(task_running=0.7)
-        self.state = SimpleNamespace(stage=[1, 3], level=[counters, counters], finetune=[ft, ft])
-
-    def _training(self):
-        return [0, 1]
-
-    def _finetuning(self, s):
-        return s == 1
-
-    def _plan(self, s):
-        return self.plans[self.state.stage[s]]
-
-    def _level_cfg(self, s):
-        return SimpleNamespace(max_steps_per_level=0)
+from smjax.train.hooks import ChunkReport  # noqa: E402
+from smjax.train.progress import ProgressBar  # noqa: E402
+from smjax.train.stages import SeedStatus  # noqa: E402
 
 
 def test_the_bar_says_it_counts_stages_and_where_the_seeds_are():
-    bar = Progress(_Trainer())
+    # two seeds, three levels and fine-tuning: seed 0 at level 2, seed 1 fine-tuning
+    trainer = SimpleNamespace(seeds=[0, 1], plans=[None] * 3, num_stages=4,
+                              state=SimpleNamespace(stage=[1, 3]))
+    seeds = [SeedStatus(where="L2", running=0.5, gate=None, task=None, episodes=10,
+                        env_steps=80, by_steps=False),
+             SeedStatus(where="FT", running=None, gate=None, task=0.7, episodes=10,
+                        env_steps=80, by_steps=False)]
+    hook = ProgressBar()
+    hook.start(trainer)
     try:
-        bar.draw(1.0)
-        assert bar.bar.desc == "2 seeds x (3 levels + fine-tune)"
-        assert bar.bar.unit == "stage" and bar.bar.total == 8 and bar.bar.n == 4
-        assert "seeds_at=L2:1 FT:1" in bar.bar.postfix
+        hook.chunk(trainer, ChunkReport(chunk=1, seconds=1.0, steps=64, scalars=[], seeds=seeds,
+                                        stages_done=4, stage_ended=False))
+        assert hook.bar.desc == "2 seeds x (3 levels + fine-tune)"
+        assert hook.bar.unit == "stage" and hook.bar.total == 8 and hook.bar.n == 4
+        assert "seeds_at=L2:1 FT:1" in hook.bar.postfix
+        assert "task=0.70" in hook.bar.postfix and "success=0.50" in hook.bar.postfix
     finally:
-        bar.bar.close()
+        hook.bar.close()
 
 
 def test_the_guide_describes_the_bar_it_shows():

@@ -156,7 +156,7 @@ def test_a_checkpoint_from_before_a_new_config_field_resumes_unless_it_differs(m
 def test_checkpoint_formats_this_smjax_cannot_read_are_refused_by_name(tmp_path):
     # format 2 (windows as host lists) is migrated on restore (test_finetune resumes one);
     # older ones and newer ones are refused, saying which
-    from smjax.train.loop import CHECKPOINT_FORMAT
+    from smjax.train.hooks import CHECKPOINT_FORMAT
 
     host = {"finetune": {}}
     for version in range(2, CHECKPOINT_FORMAT + 1):

@@ -1,4 +1,4 @@
-"""The fine-tuning phase: the learned hierarchy keeps learning without teleports.
+"""The fine-tuning stage: the learned hierarchy keeps learning without teleports.
 
 Levels learn with help: while a level trains, every option it calls that is not learned
 yet is teleported (or played by a scripted controller), and a level stops at 0.8 running
@@ -28,7 +28,7 @@ Either way each option trains on its own decisions with its own reward (the root
 environment's; a template: its F_o), in the states the learned hierarchy calls it from.
 The phase starts with a gate: the levels' hierarchy is evaluated on fresh teleport-free
 episodes (``final_success_before``), and a seed that already passes ``finetune_threshold``
-there is not fine-tuned at all (``_pass_before``).
+there is not fine-tuned at all (``FinetuneStage.enter``).
 Whole-task episodes end by themselves, so the task's teleport-free running success is known
 after every update: once it reaches ``finetune_threshold`` a gate (fresh episodes of the
 hierarchy with the learners frozen in, no teleports) decides. The phase ends when the gate
@@ -44,286 +44,265 @@ good one), so it never ends worse than the levels left it.
 """
 from __future__ import annotations
 
-import time
-
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from smjax.train import distributed as dist
-from smjax.train.config import ConfigError
-from smjax.train.seed_arrays import (
-    NonFiniteError, all_finite, fold_in, freeze, local, select_seeds,
+from smjax.train.config import TrainConfig
+from smjax.train.finetune_ops import bank_rows, next_turn, store_learned
+from smjax.train.levels import count_level, freeze_learners, level_tag
+from smjax.train.plans import LevelPlan, check_joint_learner, finetune_order
+from smjax.train.seed_arrays import fold_in, freeze, select_seeds
+from smjax.train.slots import Slots
+from smjax.train.stages import (
+    ChunkOut, Ends, Scalar, SeedControls, SeedStatus, learner_scalars,
 )
+from smjax.train.state import TrainerState
+
+# evaluation key folds no gate uses (gates fold in the chunk count)
+BEFORE_FOLD = np.iinfo(np.uint32).max
+CHECK_FOLD = np.iinfo(np.uint32).max - 1
 
 
-def next_turn(turn: int, order: list[str], turns: list[dict], rested: dict[str, int],
-              threshold: float, max_rest: int) -> int:
-    """The turn index after ``turn`` (its option: ``order[index % len(order)]``), skipping
-    resting options; updates ``rested`` (template -> turns sat out in a row).
+class FinetuneStage:
+    """Seeds fine-tuning (``st.stage[s] == len(plans)``: after every level), in turns or
+    jointly (``joint``); ``state.finetune`` holds each seed's ``FinetuneCounters`` and, in
+    turns, ``state.level`` the turn's."""
 
-    An option rests while its last turn (in ``turns``, the phase's record) ended with
-    running success >= ``threshold``, for at most ``max_rest`` turns in a row: then it
-    plays again, so an option whose callers have moved on is checked where they now call
-    it. Ends: each skip raises a counter that stops at ``max_rest``."""
-    last = {t["template"]: t["running_success"] for t in turns}
-    index = turn + 1
-    while True:
-        name = order[index % len(order)]
-        success = last.get(name)
-        if success is None or success < threshold or rested.get(name, 0) >= max_rest:
-            rested[name] = 0
-            return index
-        rested[name] = rested.get(name, 0) + 1
-        index += 1
+    def __init__(self, engine, cfg: TrainConfig, plans: list[LevelPlan], slots: Slots):
+        self.engine, self.cfg, self.slots = engine, cfg, slots
+        # fine-tuning's learner hyper-parameter leaves (``finetune_hp``), once a learner exists
+        self.hp: dict = {}
+        self.index = len(plans)
+        self.order = finetune_order(engine.h, cfg)  # the turns' options, round and round
+        check_joint_learner(engine.h, cfg, engine.agent)
+        self.joint = cfg.finetune_mode == "joint"
+        # the level number fine-tuning's curve is recorded under (after the last level)
+        self.level = max(p.level for p in plans) + 1
+        self.candidates: list[int] = []  # seeds whose task success reached the threshold
 
+    def holds(self, st: TrainerState, s: int) -> bool:
+        return st.stage[s] == self.index
 
-@jax.jit
-def bank_rows(bank, options: jax.Array):
-    """Per seed (leading axis), the bank's params of option ``options[s]``."""
-    rows = jnp.arange(options.shape[0])
-    return jax.tree.map(lambda b: b[rows, options], bank)
+    def plan(self, st: TrainerState, s: int) -> LevelPlan:
+        """The option whose turn it is (joint: the root's, the first turn's)."""
+        return self.order[st.finetune[s].turn % len(self.order)]
 
+    def side_cost(self) -> float:
+        return self.cfg.finetune_side_cost_weight if self.cfg.finetune_side_cost else 0.0
 
-@jax.jit
-def store_learned(mask: jax.Array, learned: jax.Array, params, bank):
-    """Per masked seed, ``params`` [S, O, ...] (a learner per option) stored in the bank at
-    every learned option; the rest of the bank is kept."""
-    keep = mask[:, None] & learned
+    def controls(self, st: TrainerState, s: int) -> SeedControls:
+        """A turn's chunk: the learned hierarchy alone (no teleports), whole episodes."""
+        plan = self.plan(st, s)
+        level = self.cfg.for_level(plan.name)
+        return SeedControls(
+            option=plan.option, start=plan.start, teleport=False, keep_episodes=True,
+            side_cost=self.side_cost(), gamma=self.slots.level_gamma(plan.name, s),
+            window=level.success_window, task_window=self.cfg.success_window,
+            threshold=level.threshold, joint=self.joint)
 
-    def pick(p, b):
-        return jnp.where(keep.reshape(keep.shape + (1,) * (p.ndim - 2)), p, b)
+    def option_gammas(self, s: int) -> list[float]:
+        """Joint fine-tuning's discount per option for slot ``s``: the one the option's
+        level trained it at (``levels[name]["gamma"]``), else the slot's: each option's
+        values keep the horizon they were learned for (``smjax.options.joint``)."""
+        level = {p.option: p.name for p in self.order}
+        return [self.slots.level_gamma(level.get(o), s)
+                for o in range(self.engine.h.num_options)]
 
-    return jax.tree.map(pick, params, bank)
+    def joint_controls(self) -> tuple[list, list, list]:
+        """Joint fine-tuning's per-seed inputs for every seed: the side cost's weight, each
+        option's discount, the learner's and the task's window sizes."""
+        S, window = len(self.slots), self.cfg.success_window
+        return ([self.side_cost()] * S, [self.option_gammas(s) for s in range(S)],
+                [[window, window]] * S)
 
+    def status(self, st: TrainerState, s: int) -> SeedStatus:
+        c = st.level[s]
+        return SeedStatus(where="FT", running=None, gate=None, task=st.finetune[s].task_running,
+                          episodes=c.episodes, env_steps=c.env_steps,
+                          by_steps=bool(self.cfg.for_level(self.plan(st, s).name)
+                                        .max_steps_per_level))
 
-class FinetunePhase:
-    """The trainer's fine-tuning steps (mixed into ``HierarchyTrainer``, whose state they
-    use: ``state.finetune`` holds each seed's ``FinetuneCounters``)."""
+    # ---- a chunk ---------------------------------------------------------------
+    def account(self, st: TrainerState, seeds: list[int], out: ChunkOut) -> list[Scalar]:
+        """Count the chunk toward these seeds' phase (the task's curve) and their turns'
+        counters; remember the seeds whose task success reached the threshold."""
+        steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
+        # joint learners' metrics at the phase's env steps before this chunk's
+        scalars = self.joint_scalars(st, seeds, out)
+        self.candidates = [s for s in seeds
+                           if self.account_task(st, s, out, steps_per_update, scalars)]
+        for s in seeds:
+            seed, plan = self.slots.seeds[s], self.plan(st, s)
+            scalars += count_level(st, s, out, steps_per_update, level_tag(seed, plan))[1]
+        if out.metrics is not None and not self.joint:
+            scalars += [x for s in seeds for x in learner_scalars(
+                out.metrics, s, f"seed_{self.slots.seeds[s]}/finetune/{self.plan(st, s).name}",
+                st.finetune[s].env_steps)]
+        return scalars
 
-    @property
-    def finetune_level(self) -> int:
-        """The level number fine-tuning's curve is recorded under (after the last level)."""
-        return max(p.level for p in self.plans) + 1
-
-    def _finetune_hp(self, hp: dict) -> dict:
-        """``cfg.finetune_agent`` as the learner's per-slot hyper-parameter leaves."""
-        unknown = sorted(set(self.cfg.finetune_agent) - set(hp))
-        if unknown:
-            raise ConfigError(f"config field 'finetune_agent' names {unknown}, which the "
-                              f"{self.cfg.algo} learner does not read per turn; it reads "
-                              f"{sorted(hp)}")
-        return {k: jnp.full_like(hp[k], v) for k, v in self.cfg.finetune_agent.items()}
-
-    def _account_task(self, stats, task, s: int) -> bool:
-        """Count seed ``s``'s fine-tuning chunk (``task``: the task window's, per update);
-        True if its teleport-free task success over the window reached the threshold."""
-        cfg, rec, seed = self.cfg, self.state.finetune[s], self.seeds[s]
-        for success, episodes in zip(stats.task_success[s], stats.task_episodes[s]):
+    def account_task(self, st: TrainerState, s: int, out: ChunkOut, steps_per_update: int,
+                     scalars: list[Scalar]) -> bool:
+        """Count seed ``s``'s chunk toward its phase (the task window's batches); True if
+        its teleport-free task success over the window reached the threshold."""
+        cfg, rec, seed, task = self.cfg, st.finetune[s], self.slots.seeds[s], out.windows[1]
+        for success, episodes in zip(out.stats.task_success[s], out.stats.task_episodes[s]):
             rec.add_to_block(success, episodes, cfg.finetune_plateau_episodes)
-        rows = rec.count(stats.env_episodes[s], task[0][s], task[1][s],
-                         cfg.num_envs * cfg.rollout_ticks)
+        rows = rec.count(out.stats.env_episodes[s], task[0][s], task[1][s], steps_per_update)
         for episodes, env_steps, running in rows:
-            self.state.curves.append([seed, self.finetune_level, "finetune", episodes,
-                                      env_steps, running, s])
-            if self._tb is not None and running is not None:
-                self._tb.add_scalar(f"seed_{seed}/finetune/task_success", running, env_steps)
+            st.curves.append([seed, self.level, "finetune", episodes, env_steps, running, s])
+            if running is not None:
+                scalars.append(Scalar(f"seed_{seed}/finetune/task_success", running, env_steps))
         return (rec.task_running is not None and rec.task_running >= cfg.finetune_threshold
                 and self.engine.root_has_threshold)  # a raw return is no success rate
 
-    def _phase_spent(self, s: int) -> bool:
-        return self.state.finetune[s].episodes >= self.cfg.finetune_max_episodes
-
-    def _candidate_bank(self, seeds: list[int]):
-        """(bank, learned) with these seeds' learners frozen in at their options (joint:
-        every learned option's learner at its own)."""
-        a = self.arrays
-        if self.joint:
-            mask = self._place_small(self._mask(seeds))
-            return store_learned(mask, a.learned, a.joint.learner.params, a.bank), a.learned
-        mask, options = self._place_small((self._mask(seeds), self._options()))
-        return freeze(mask, options, a.state.learner.params, a.bank, a.learned)
-
-    def _accept_task(self, candidates: list[int]) -> list[int]:
-        """Fine-tuning seeds (of ``candidates``) whose hierarchy, with the learner frozen in,
-        passes a teleport-free gate at ``finetune_threshold`` (every ``gate_interval``
-        chunks, and once more when the budget is spent; all candidates without the gate)."""
-        st, cfg = self.state, self.cfg
-        if not cfg.gate or not candidates:
-            return candidates
-        due = [s for s in candidates
-               if st.chunks >= st.finetune[s].gate_next or self._phase_spent(s)]
-        if not due:
+    def joint_scalars(self, st: TrainerState, seeds: list[int], out: ChunkOut) -> list[Scalar]:
+        """Joint: each learned option's learner metrics ({name: [S, U, O]}, the mean over
+        the chunk's updates) under ``seed_S/finetune/joint/NAME/learner/``."""
+        if out.joint_metrics is None:
             return []
-        S = len(self.seeds)
-        keys = fold_in(self.arrays.keys, jnp.asarray(st.chunks, jnp.uint32))
-        bank, learned = self._candidate_bank(due)
-        result, compile_s = self.engine.evaluate(
-            keys, bank, learned, place=self._place_small,
-            due=[s in due for s in range(S)], threshold=cfg.finetune_threshold)
-        st.compile_seconds += compile_s
-        result = dist.gather(result)
-        return [s for s in due if st.finetune[s].record_gate(
-            result, s, st.chunks + cfg.gate_interval) >= cfg.finetune_threshold]
+        scalars = []
+        for s in seeds:
+            for o, name in enumerate(self.engine.h.option_names):
+                if not out.joint_learned[s, o]:
+                    continue
+                tag = f"seed_{self.slots.seeds[s]}/finetune/joint/{name}/learner"
+                scalars += [Scalar(f"{tag}/{key}", float(np.mean(value[s, :, o])),
+                                   st.finetune[s].env_steps)
+                            for key, value in out.joint_metrics.items() if value.ndim == 3]
+        return scalars
 
-    def _finetune_ends(self, passed: list[int]) -> tuple[list[int], list[int]]:
-        """(seeds whose phase ends: passed or out of budget, seeds whose turn ends)."""
-        st, cfg = self.state, self.cfg
-        phase, turn = [], []
-        for s in self._training():
-            if not self._finetuning(s):
-                continue
+    def spent(self, st: TrainerState, s: int) -> bool:
+        return st.finetune[s].episodes >= self.cfg.finetune_max_episodes
+
+    def decide(self, st: TrainerState, seeds: list[int], controls: list[SeedControls],
+               ends: Ends) -> list[Scalar]:
+        """Seeds whose phase ends (passed, out of budget or on a plateau) and, in turns,
+        whose turn ends (its option's running success or its episodes reached their
+        bound)."""
+        cfg, passed = self.cfg, self.gate(st, controls)
+        for s in seeds:
             running, rec = st.level[s].running, st.finetune[s]
             plateau = (cfg.finetune_plateau_episodes > 0
                        and rec.plateaued(cfg.finetune_plateau_gain))
-            if s in passed or self._phase_spent(s) or plateau:
-                phase.append(s)
+            if s in passed or self.spent(st, s) or plateau:
+                ends.phases.append(s)
                 rec.reached = s in passed
                 rec.stop = "gate" if s in passed else "plateau" if plateau else "budget"
             elif not self.joint and (
                     (running is not None and running >= cfg.finetune_option_threshold)
                     or st.level[s].episodes >= cfg.finetune_turn_episodes):
-                turn.append(s)
-        return phase, turn
+                ends.turns.append(s)
+        return []
 
-    def _finish_turns(self, seeds: list[int], phase_ended: list[int]) -> None:
-        """Freeze these seeds' learners back into the bank; the next turn, or done (the
-        phase then hands back the better bank: ``_keep_better``)."""
-        if not seeds:
-            return
-        st = self.state
-        if self.joint:
-            self._freeze_joint(seeds)
-        else:
-            self._freeze_learners(seeds)
-        self._keep_better(phase_ended)
-        for s in seeds:
-            st.finetune[s].turns.append({"template": "joint" if self.joint else self._plan(s).name,
-                                         "episodes": st.level[s].episodes,
-                                         "running_success": st.level[s].running})
-            if s in phase_ended:
-                st.stage[s] += 1
-            else:
-                rec = st.finetune[s]
-                rec.turn = next_turn(rec.turn, [p.name for p in self.ft_order], rec.turns,
-                                     rec.rested, self.cfg.finetune_option_threshold,
-                                     self.cfg.finetune_max_rest)
-            st.started[s] = False
-
-    # ---- joint fine-tuning (TrainConfig.finetune_mode "joint") ------------------------
-    def _joint_tuning(self, s: int) -> bool:
-        """Seed ``s`` fine-tunes all its options at once (``arrays.joint``)."""
-        return self.joint and self._finetuning(s)
-
-    def _option_gammas(self, s: int) -> list[float]:
-        """Joint fine-tuning's discount per option for slot ``s``: the one the option's
-        level trained it at (``levels[name]["gamma"]``), else the slot's: each option's
-        values keep the horizon they were learned for (``smjax.options.joint``)."""
-        level = {p.option: p.name for p in self.ft_order}
-        return [self._level_gamma(level.get(o), s) for o in range(self.engine.h.num_options)]
-
-    def _joint_chunk(self, seeds: list[int]):
-        """Joint fine-tuning's compiled chunk for these seeds (the others keep their
-        state); its stats and windows as ``_chunk``'s, each learned option's learner
-        metrics to TensorBoard."""
-        S, a, cfg = len(self.seeds), self.arrays, self.cfg
-        weight = cfg.finetune_side_cost_weight if cfg.finetune_side_cost else 0.0
-        sizes = [[cfg.success_window, cfg.success_window]] * S
-        args = (a.joint, self._per_seed([s in seeds for s in range(S)], bool), a.learned,
-                self._per_seed([weight] * S, jnp.float32),
-                self._per_seed([self._option_gammas(s) for s in range(S)], jnp.float32),
-                (a.window, a.task_window), self._per_seed(sizes, jnp.int32))
-        if self._compiled_joint is None:
-            t0 = time.perf_counter()
-            self._compiled_joint = self.engine.compile("joint_chunk", self.engine.joint_chunk,
-                                                       args, donate=(0,))
-            self.state.compile_seconds += time.perf_counter() - t0
-        state, stats, metrics, (window, task_window), windows = self._compiled_joint(*args)
-        stats, windows = dist.gather((stats, windows))
-        if not all_finite(state.learner.params):
-            raise NonFiniteError(f"non-finite learner parameters in chunk {self.state.chunks} "
-                                 f"(joint fine-tuning of seeds {[self.seeds[s] for s in seeds]})")
-        self.arrays = a.replace(joint=state, window=window, task_window=task_window)
-        if self.cfg.tensorboard:  # collectives: every process gathers, process 0 writes
-            self._log_joint(dist.gather(metrics), np.asarray(dist.gather(a.learned)), seeds)
-        return stats, windows
-
-    def _log_joint(self, metrics: dict, learned: np.ndarray, seeds: list[int]) -> None:
-        """TensorBoard: each learned option's learner metrics ([S, U, O]: the mean over the
-        chunk's updates) under ``seed_S/finetune/joint/NAME/learner/``."""
-        if self._tb is None:
-            return
-        # once per chunk, as ``_log_learner`` does (not per seed and option)
-        means = {key: np.asarray(value, np.float64) for key, value in metrics.items()}
-        for s in seeds:
-            for o, name in enumerate(self.engine.h.option_names):
-                if not learned[s, o]:
-                    continue
-                tag = f"seed_{self.seeds[s]}/finetune/joint/{name}/learner"
-                for key, value in means.items():
-                    if value.ndim == 3:  # [S, U, O]: one scalar per update and option
-                        self._tb.add_scalar(f"{tag}/{key}", float(np.mean(value[s, :, o])),
-                                            self.state.finetune[s].env_steps)
-
-    def _freeze_joint(self, seeds: list[int]) -> None:
-        """Store these seeds' learned options' joint learners in their banks."""
-        a = jax.tree.map(local, self.arrays)
-        bank = store_learned(self._mask(seeds), a.learned, a.joint.learner.params, a.bank)
-        self.arrays = a.replace(bank=bank)
-        self._place()
-
-    def _evaluate_bank(self, seeds: list[int], fold: int) -> dict:
-        """These seeds' hierarchies as the bank holds them, on fresh teleport-free episodes
-        (``fold``: a key fold no gate uses; gates fold in the chunk count)."""
-        S, a = len(self.seeds), self.arrays
-        keys = fold_in(a.keys, jnp.asarray(fold, jnp.uint32))
+    def gate(self, st: TrainerState, controls: list[SeedControls]) -> list[int]:
+        """Seeds (of ``candidates``) whose hierarchy, with the learner frozen in, passes a
+        teleport-free gate at ``finetune_threshold`` (every ``gate_interval`` chunks, and
+        once more when the budget is spent; all candidates without the gate)."""
+        cfg, candidates = self.cfg, self.candidates
+        if not cfg.gate or not candidates:
+            return candidates
+        due = [s for s in candidates if st.chunks >= st.finetune[s].gate_next or self.spent(st, s)]
+        if not due:
+            return []
+        keys = fold_in(self.slots.arrays.keys, jnp.asarray(st.chunks, jnp.uint32))
+        bank, learned = self.candidate_bank(due, [c.option for c in controls])
         result, compile_s = self.engine.evaluate(
-            keys, a.bank, a.learned, place=self._place_small,
-            due=[s in seeds for s in range(S)])
-        self.state.compile_seconds += compile_s
-        return dist.gather(result)
+            keys, bank, learned, place=self.slots.small,
+            due=[s in due for s in range(len(self.slots))], threshold=cfg.finetune_threshold)
+        st.compile_seconds += compile_s
+        result = dist.gather(result)
+        return [s for s in due if st.finetune[s].record_gate(
+            result, s, st.chunks + cfg.gate_interval) >= cfg.finetune_threshold]
 
-    def _evaluate_before(self, seeds: list[int]) -> None:
-        """final_success of these seeds' hierarchies as the levels left them; their banks
-        are kept (``TrainArrays.levels_bank``) for ``_keep_better``."""
-        if not seeds:
-            return
-        result = self._evaluate_bank(seeds, np.iinfo(np.uint32).max)
-        a = jax.tree.map(local, self.arrays)
-        self.arrays = a.replace(levels_bank=select_seeds(self._mask(seeds), a.bank, a.levels_bank))
-        self._place()
-        for s in seeds:
-            self.state.finetune[s].success_before = float(result["success"][s])
-            self.state.finetune[s].baseline = True
-        self._pass_before(seeds, result)
+    def candidate_bank(self, seeds: list[int], options: list[int]):
+        """(bank, learned) with these seeds' learners frozen in at their options (joint:
+        every learned option's learner at its own)."""
+        a, slots = self.slots.arrays, self.slots
+        if self.joint:
+            mask = slots.small(slots.mask(seeds))
+            return store_learned(mask, a.learned, a.joint.learner.params, a.bank), a.learned
+        mask, options = slots.small((slots.mask(seeds), jnp.asarray(options, jnp.int32)))
+        return freeze(mask, options, a.state.learner.params, a.bank, a.learned)
 
-    def _pass_before(self, seeds: list[int], result: dict) -> None:
-        """The evaluation before the phase is also its first gate (the same fresh
-        teleport-free episodes as ``_accept_task``'s): a seed whose levels' hierarchy already
-        passes ``finetune_threshold`` has nothing to fine-tune, and its phase ends before it
+    # ---- the phase's boundaries --------------------------------------------------
+    def enter(self, st: TrainerState, seeds: list[int]) -> None:
+        """Seeds that finished their levels: final_success of their hierarchies as the
+        levels left them, their banks kept (``TrainArrays.levels_bank``) for ``keep_better``.
+        That evaluation is also the phase's first gate (the same fresh teleport-free
+        episodes as ``gate``'s): a seed whose levels' hierarchy already passes
+        ``finetune_threshold`` has nothing to fine-tune, and its phase ends before it
         starts: fine-tuning a hierarchy that already passes can only cost env steps, and
         with DQN it can risk the hierarchy."""
-        if not self.cfg.gate:
+        if not seeds:
             return
+        result = self.evaluate_bank(st, seeds, BEFORE_FOLD)
+        slots = self.slots
+        a = slots.local()
+        slots.set(a.replace(levels_bank=select_seeds(slots.mask(seeds), a.bank, a.levels_bank)))
         for s in seeds:
-            rec = self.state.finetune[s]
+            rec = st.finetune[s]
+            rec.success_before, rec.baseline = float(result["success"][s]), True
+            if not self.cfg.gate:
+                continue
             rec.gate_attempts += 1
             rec.gate_env_steps += int(result["env_steps"][s])
             rec.gate_success = rec.success_before
             if rec.success_before >= self.cfg.finetune_threshold:
                 rec.reached, rec.stop, rec.kept = True, "gate", "levels"
-                self.state.stage[s] += 1  # past the phase: nothing starts for it
+                st.stage[s] += 1  # past the phase: nothing starts for it
 
-    def _keep_better(self, seeds: list[int]) -> None:
+    def evaluate_bank(self, st: TrainerState, seeds: list[int], fold: int) -> dict:
+        """These seeds' hierarchies as the bank holds them, on fresh teleport-free episodes
+        (``fold``: a key fold no gate uses)."""
+        a = self.slots.arrays
+        keys = fold_in(a.keys, jnp.asarray(fold, jnp.uint32))
+        result, compile_s = self.engine.evaluate(
+            keys, a.bank, a.learned, place=self.slots.small,
+            due=[s in seeds for s in range(len(self.slots))])
+        st.compile_seconds += compile_s
+        return dist.gather(result)
+
+    def finish(self, st: TrainerState, ends: Ends, options: list[int]) -> None:
+        """Seeds that finished their levels enter the phase (``enter``); seeds whose turn
+        or phase ended freeze their learners back into their banks (``options``: per
+        seed, the option whose turn it was), then go on to the next turn, or are done
+        (the phase hands back the better bank: ``keep_better``)."""
+        self.enter(st, [s for s in ends.levels if self.holds(st, s)])
+        seeds = ends.turns + ends.phases
+        if not seeds:
+            return
+        slots = self.slots
+        if self.joint:
+            a = slots.local()
+            slots.set(a.replace(bank=store_learned(slots.mask(seeds), a.learned,
+                                                   a.joint.learner.params, a.bank)))
+        else:
+            freeze_learners(slots, seeds, options)
+        self.keep_better(st, ends.phases)
+        for s in seeds:
+            rec = st.finetune[s]
+            rec.turns.append({"template": "joint" if self.joint else self.plan(st, s).name,
+                              "episodes": st.level[s].episodes,
+                              "running_success": st.level[s].running})
+            if s in ends.phases:
+                st.stage[s] += 1
+            else:
+                rec.turn = next_turn(rec.turn, [p.name for p in self.order], rec.turns,
+                                     rec.rested, self.cfg.finetune_option_threshold,
+                                     self.cfg.finetune_max_rest)
+            st.started[s] = False
+
+    def keep_better(self, st: TrainerState, seeds: list[int]) -> None:
         """Seeds whose phase ends: where no gate passed, evaluate the fine-tuned hierarchy
         and put the levels' bank back if it scored higher before fine-tuning."""
-        recs = self.state.finetune
+        recs = st.finetune
         for s in seeds:
             recs[s].kept = "fine-tuned"
         check = [s for s in seeds if not recs[s].reached and recs[s].baseline]
         if not check:
             return
-        result = self._evaluate_bank(check, np.iinfo(np.uint32).max - 1)
+        result = self.evaluate_bank(st, check, CHECK_FOLD)
         worse = []
         for s in check:
             recs[s].check_success = float(result["success"][s])
@@ -332,6 +311,30 @@ class FinetunePhase:
                 recs[s].kept = "levels"
                 worse.append(s)
         if worse:
-            a = jax.tree.map(local, self.arrays)
-            self.arrays = a.replace(bank=select_seeds(self._mask(worse), a.levels_bank, a.bank))
-            self._place()
+            a = self.slots.local()
+            self.slots.set(a.replace(bank=select_seeds(self.slots.mask(worse), a.levels_bank,
+                                                       a.bank)))
+
+    def start(self, st: TrainerState, seeds: list[int], fresh, arrays, k_reset, options):
+        """These seeds' next turn (joint: the phase): ``fresh``, the new learners and
+        environments of every seed (a ``SeedState``), and ``arrays`` as they will be, with
+        these seeds' learners continuing from the bank (joint: one per option, in
+        ``arrays.joint``) and, from a seed's second turn on, its episodes in flight going
+        on (``finetune_continue_episodes``)."""
+        learner, mask = fresh.learner, self.slots.mask(seeds)
+        if self.joint:
+            joint = self.engine.joint_state(learner.replace(hp={**learner.hp, **self.hp}),
+                                            arrays.bank, k_reset, fresh.key)
+            arrays = arrays.replace(joint=select_seeds(mask, joint, arrays.joint))
+        else:
+            warm = self.engine.warm_start(learner, bank_rows(arrays.bank,
+                                                             jnp.asarray(options, jnp.int32)))
+            fresh = fresh._replace(learner=select_seeds(
+                mask, warm.replace(hp={**warm.hp, **self.hp}), learner))
+        go_on = [s for s in seeds
+                 if self.cfg.finetune_continue_episodes and st.finetune[s].turns]
+        if go_on:
+            carry = select_seeds(self.slots.mask(go_on),
+                                 self.engine.hand_over(arrays.state.carry), fresh.carry)
+            fresh = fresh._replace(carry=carry)
+        return fresh, arrays

@@ -1,106 +1,166 @@
-"""The trainer's level steps: counting each chunk toward the seeds' levels, a level's
-budget, its acceptance gate, and freezing a finished level's learner into the bank.
+"""The level stage: a seed trains one option at a time, top-down (or as its method plans).
 
-``LevelPhase`` is mixed into ``HierarchyTrainer`` (``smjax.train.loop``), whose state it
-uses: ``state.level`` holds each seed's ``LevelCounters`` (in fine-tuning turns, the
-turn's). Fine-tuning's own steps are ``smjax.train.finetune.FinetunePhase``'s.
+A chunk counts toward each seed's level (``LevelCounters`` in ``state.level``); a level
+ends when the learner's running success reaches its threshold and, with the gate on, the
+learner as it will be frozen passes that threshold on fresh episodes; or when its budget
+(episodes, env steps) is spent. Its learner is then frozen into the seed's policy bank and
+the seed moves on to its next level (or to fine-tuning, ``smjax.train.finetune``).
 """
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 
 from smjax.train import distributed as dist
 from smjax.train.config import TrainConfig
-from smjax.train.seed_arrays import fold_in, freeze, local
+from smjax.train.plans import LevelPlan
+from smjax.train.seed_arrays import fold_in, freeze
+from smjax.train.slots import Slots
+from smjax.train.stages import (
+    ChunkOut, Ends, Scalar, SeedControls, SeedStatus, learner_scalars,
+)
+from smjax.train.state import TrainerState
 
 
-class LevelPhase:
-    """The trainer's level steps (mixed into ``HierarchyTrainer``)."""
+def level_tag(seed: int, plan: LevelPlan) -> str:
+    """A seed's logging prefix at a level."""
+    return f"seed_{seed}/level_{plan.level}_{plan.name}"
 
-    def _account(self, stats, windows) -> tuple[list[int], list[int]]:
-        """Count a chunk's episodes, steps and windows (learner's, task's: ``Engine._chunk``);
-        record the curves; the seeds whose running success reached the threshold (levels), and
-        the fine-tuning seeds whose task success reached theirs."""
-        task_candidates = [s for s in self._training() if self._finetuning(s)
-                           and self._account_task(stats, windows[1], s)]
-        candidates = []
+
+def count_level(st: TrainerState, s: int, out: ChunkOut, steps_per_update: int, tag: str
+                ) -> tuple[list, list[Scalar]]:
+    """Count a chunk's updates toward seed ``s``'s level counters (in fine-tuning turns,
+    the turn's): per update (episodes, env_steps, running success) after it, and their
+    scalars under ``tag``."""
+    rows = st.level[s].count(out.stats.env_episodes[s], *(x[s] for x in out.windows[0]),
+                             steps_per_update)
+    scalars = []
+    for episodes, env_steps, running in rows:
+        if running is not None:
+            scalars += [Scalar(f"{tag}/running_success", running, env_steps),
+                        Scalar(f"{tag}/episodes", episodes, env_steps)]
+    return rows, scalars
+
+
+class LevelStage:
+    """Seeds at one of the planned levels (``st.stage[s] < len(plans)``)."""
+
+    def __init__(self, engine, cfg: TrainConfig, plans: list[LevelPlan], slots: Slots):
+        self.engine, self.cfg, self.plans, self.slots = engine, cfg, plans, slots
+        self.candidates: list[int] = []  # seeds whose running success reached the threshold
+
+    def holds(self, st: TrainerState, s: int) -> bool:
+        return st.stage[s] < len(self.plans)
+
+    def plan(self, st: TrainerState, s: int) -> LevelPlan:
+        """Seed ``s``'s level (a seed past every level: the last one)."""
+        return self.plans[min(st.stage[s], len(self.plans) - 1)]
+
+    def level_cfg(self, st: TrainerState, s: int) -> TrainConfig:
+        return self.cfg.for_level(self.plan(st, s).name)
+
+    def controls(self, st: TrainerState, s: int) -> SeedControls:
+        """A level's chunk: teleports on, the level's discount, window and threshold."""
+        plan, level = self.plan(st, s), self.level_cfg(st, s)
+        return SeedControls(
+            option=plan.option, start=plan.start, teleport=True,
+            keep_episodes=self.cfg.continue_episodes, side_cost=self.cfg.level_side_cost_weight,
+            gamma=self.slots.level_gamma(plan.name, s), window=level.success_window,
+            task_window=0, threshold=level.threshold)
+
+    def status(self, st: TrainerState, s: int) -> SeedStatus:
+        c = st.level[s]
+        return SeedStatus(where=f"L{self.plan(st, s).level}", running=c.running,
+                          gate=c.gate_success, task=None, episodes=c.episodes,
+                          env_steps=c.env_steps,
+                          by_steps=bool(self.level_cfg(st, s).max_steps_per_level))
+
+    def account(self, st: TrainerState, seeds: list[int], out: ChunkOut) -> list[Scalar]:
+        """Count the chunk toward these seeds' levels and record their curves; remember the
+        seeds whose running success reached the threshold (``candidates``)."""
         steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
-        for s in self._training():
-            plan, cfg, seed, c = self._plan(s), self._level_cfg(s), self.seeds[s], self.state.level[s]
-            rows = c.count(stats.env_episodes[s], *(x[s] for x in windows[0]), steps_per_update)
+        scalars, self.candidates = [], []
+        for s in seeds:
+            plan, seed = self.plan(st, s), self.slots.seeds[s]
+            tag = level_tag(seed, plan)
+            rows, logged = count_level(st, s, out, steps_per_update, tag)
+            scalars += logged
             for episodes, env_steps, running in rows:
-                if not self._finetuning(s):  # (fine-tuning records the task's curve)
-                    self.state.curves.append([seed, plan.level, plan.name, episodes, env_steps,
-                                              running, s])
-                if self._tb is not None and running is not None:
-                    tag = self._tb_level_tag(s)
-                    self._tb.add_scalar(f"{tag}/running_success", running, env_steps)
-                    self._tb.add_scalar(f"{tag}/episodes", episodes, env_steps)
-            if (c.running is not None and c.running >= cfg.threshold
-                    and not self._finetuning(s) and self._has_threshold(plan.option)):
-                candidates.append(s)
-        return candidates, task_candidates
+                st.curves.append([seed, plan.level, plan.name, episodes, env_steps, running, s])
+            if out.metrics is not None:
+                scalars += learner_scalars(out.metrics, s, tag, st.level[s].env_steps)
+            running = st.level[s].running
+            if (running is not None and running >= self.level_cfg(st, s).threshold
+                    and self.has_threshold(plan.option)):
+                self.candidates.append(s)
+        return scalars
 
-    def _has_threshold(self, option: int) -> bool:
+    def has_threshold(self, option: int) -> bool:
         """A level can end at its threshold: an option's success lies in [0, 1]; the root's
         (option 0) unless it is a return on no known scale (CartPole's, tens, would pass
         0.8 at once): such a root level spends its whole budget instead."""
         return option != 0 or self.engine.root_has_threshold
 
-    def _budget_spent(self, cfg: TrainConfig, s: int) -> bool:
-        c = self.state.level[s]
-        return c.episodes >= cfg.max_episodes_per_level or bool(
-            cfg.max_steps_per_level and c.env_steps >= cfg.max_steps_per_level)
+    def budget_spent(self, st: TrainerState, s: int) -> bool:
+        c, level = st.level[s], self.level_cfg(st, s)
+        return c.episodes >= level.max_episodes_per_level or bool(
+            level.max_steps_per_level and c.env_steps >= level.max_steps_per_level)
 
-    def _accept(self, candidates: list[int]) -> list[int]:
-        """Seeds (of ``candidates``, whose running success reached the threshold) whose
-        level ends now: all of them without the gate; with it, those whose frozen policy
-        passes a gate attempt (tried every ``gate_interval`` chunks, and once more when
-        the budget is spent)."""
-        st, a = self.state, self.arrays
+    def decide(self, st: TrainerState, seeds: list[int], controls: list[SeedControls],
+               ends: Ends) -> list[Scalar]:
+        """The seeds (of ``seeds``, this chunk's) whose level ends now: passed (marked
+        ``reached``) or out of budget; the gate attempts' scalars."""
+        passed, scalars = self.gate(st, controls)
+        for s in passed:
+            st.level[s].reached = True
+        ends.levels = [s for s in seeds if s in passed or self.budget_spent(st, s)]
+        return scalars
+
+    def gate(self, st: TrainerState, controls: list[SeedControls]
+             ) -> tuple[list[int], list[Scalar]]:
+        """Seeds (of ``candidates``) whose level ends now: all of them without the gate;
+        with it, those whose frozen policy passes a gate attempt (tried every
+        ``gate_interval`` chunks, and once more when the budget is spent)."""
+        candidates = self.candidates
         if not self.cfg.gate or not candidates:
-            return candidates
-        due = [s for s in candidates if st.chunks >= st.level[s].gate_next
-               or self._budget_spent(self._level_cfg(s), s)]
+            return candidates, []
+        due = [s for s in candidates
+               if st.chunks >= st.level[s].gate_next or self.budget_spent(st, s)]
         if not due:
-            return []
-        S = len(self.seeds)
+            return [], []
+        a, S = self.slots.arrays, len(self.slots)
         # the attempt number varies the gate's episodes between attempts, deterministically
         keys = fold_in(a.keys, jnp.asarray(st.chunks, jnp.uint32))
-        plans = [self._plan(s) for s in range(S)]
         # one vmapped call for all seeds; those not due are skipped (their results unused)
         result, compile_s = self.engine.gate(
-            keys, a.state, a.bank, a.learned, [p.option for p in plans],
-            [p.start for p in plans], [s in due for s in range(S)],
-            [self._level_cfg(s).threshold for s in range(S)], place=self._place_small)
+            keys, a.state, a.bank, a.learned, [c.option for c in controls],
+            [c.start for c in controls], [s in due for s in range(S)],
+            [c.threshold for c in controls], place=self.slots.small)
         st.compile_seconds += compile_s
         result = dist.gather(result)
-        passed = []
+        passed, scalars = [], []
         for s in due:
-            c, cfg = st.level[s], self._level_cfg(s)
-            success = c.record_gate(result, s, st.chunks + cfg.gate_interval)
-            if self._tb is not None:
-                self._tb.add_scalar(f"{self._tb_level_tag(s)}/gate_success", success, c.env_steps)
-                self._tb.add_scalar(f"{self._tb_level_tag(s)}/gate_uncalled", c.gate_uncalled,
-                                    c.env_steps)
-            if success >= cfg.threshold:
+            c, level = st.level[s], self.level_cfg(st, s)
+            success = c.record_gate(result, s, st.chunks + level.gate_interval)
+            tag = level_tag(self.slots.seeds[s], self.plan(st, s))
+            scalars += [Scalar(f"{tag}/gate_success", success, c.env_steps),
+                        Scalar(f"{tag}/gate_uncalled", c.gate_uncalled, c.env_steps)]
+            if success >= level.threshold:
                 passed.append(s)
-        return passed
+        return passed, scalars
 
-    def _freeze_learners(self, seeds: list[int]) -> None:
-        """Store these seeds' learner params in their banks at the option they train."""
-        a = jax.tree.map(local, self.arrays)
-        bank, learned = freeze(self._mask(seeds), self._options(), a.state.learner.params,
-                               a.bank, a.learned)
-        self.arrays = a.replace(bank=bank, learned=learned)
-        self._place()
-
-    def _finish_levels(self, seeds: list[int]) -> None:
-        """Freeze these seeds' learners into the bank and record their levels."""
-        if not seeds:
+    def finish(self, st: TrainerState, ends: Ends, options: list[int]) -> None:
+        """Freeze the learners of the seeds whose level ended into their banks and record
+        their levels; they move on to their next stage."""
+        if not ends.levels:
             return
-        self._freeze_learners(seeds)
-        for s in seeds:
-            self.state.finish_level(s)
-        self._evaluate_before([s for s in seeds if self._finetuning(s)])
+        freeze_learners(self.slots, ends.levels, options)
+        for s in ends.levels:
+            st.finish_level(s)
+
+
+def freeze_learners(slots: Slots, seeds: list[int], options: list[int]) -> None:
+    """Store these seeds' learner params in their banks at ``options[s]``."""
+    a = slots.local()
+    bank, learned = freeze(slots.mask(seeds), jnp.asarray(options, jnp.int32),
+                           a.state.learner.params, a.bank, a.learned)
+    slots.set(a.replace(bank=bank, learned=learned))

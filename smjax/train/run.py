@@ -16,7 +16,8 @@ from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_d
                                  resolve_config)
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
-from smjax.train.loop import CHECKPOINT_FORMAT, HierarchyTrainer, NonFiniteError
+from smjax.train.hooks import CHECKPOINT_FORMAT
+from smjax.train.loop import HierarchyTrainer, NonFiniteError
 from smjax.train.program_cache import cacheable_identity
 from smjax.policy.artifact import policy_meta, write_policy
 from smjax.policy.hierarchies import declared_identity

@@ -175,7 +175,7 @@ def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tu
     d = jnp.clip(jnp.asarray(difficulty, jnp.float32), 0.0, 1.0)
     team = view.team
     sign = team_sign(team)
-    own, opp, facing, u, n = view.own, view.opp, view.facing, view.uniform, view.normal
+    own, facing, u = view.own, view.facing, view.uniform
     cur_dir, cur_sprint, cur_dribble, prev = view.cur_dir, view.cur_sprint, view.cur_dribble, view.prev
 
     ball = state.ball_pos[:2] * sign

@@ -1,0 +1,110 @@
+"""Running the compiled chunks for the driver loop (:mod:`smjax.train.loop`).
+
+A chunk is ``updates_per_chunk`` learner updates for every seed at once, each at its own
+stage: seeds at a level or in a fine-tuning turn run the level chunk (``Engine.chunk``:
+the option trained, teleports and episode continuation are per-seed inputs), seeds in
+joint fine-tuning run ``Engine.joint_chunk``. Each program is compiled once per run.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from smjax.train import distributed as dist
+from smjax.train.seed_arrays import NonFiniteError, all_finite
+from smjax.train.slots import Slots
+from smjax.train.stages import ChunkOut, SeedControls
+
+
+class ChunkRunner:
+    """Calls the engine's chunk programs on the slots' device state and keeps the result.
+    ``metrics``: gather the learners' update metrics (a collective with several processes)."""
+
+    def __init__(self, engine, slots: Slots, metrics: bool):
+        self.engine, self.slots, self.metrics = engine, slots, metrics
+        self.level_program = self.joint_program = None
+
+    def run(self, controls: list[SeedControls], active: list[bool],
+            joint_controls: tuple | None, chunk: int, describe: Callable[[], str]
+            ) -> tuple[ChunkOut, float]:
+        """Chunk number ``chunk``: the level chunk for the ``active`` seeds whose controls
+        are not joint, joint fine-tuning's for those that are (``joint_controls``: its
+        per-seed inputs); its outputs and the seconds spent compiling. Non-finite learner
+        parameters raise ``NonFiniteError`` (``describe()``: where the seeds train)."""
+        joint = [s for s, (c, on) in enumerate(zip(controls, active)) if on and c.joint]
+        level = [on and not c.joint for c, on in zip(controls, active)]
+        compile_s, out = 0.0, None
+        if any(level):
+            where = lambda: f"chunk {chunk} (training: {describe()})"  # noqa: E731
+            out, compile_s = self.level(controls, level, where)
+        if not joint:
+            return out, compile_s
+        where = f"chunk {chunk} (joint fine-tuning of seeds {[self.slots.seeds[s] for s in joint]})"
+        tuned, seconds = self.joint(joint, *joint_controls, lambda: where)
+        if out is None:
+            return tuned, compile_s + seconds
+        # a seed's rows are zero in the program it did not run in
+        add = lambda x, y: x + y  # noqa: E731
+        return (out._replace(stats=jax.tree.map(add, out.stats, tuned.stats),
+                             windows=jax.tree.map(add, out.windows, tuned.windows),
+                             joint_metrics=tuned.joint_metrics,
+                             joint_learned=tuned.joint_learned),
+                compile_s + seconds)
+
+    def level(self, controls: list[SeedControls], active: list[bool], describe):
+        """The level chunk for the ``active`` seeds (levels and fine-tuning turns)."""
+        a, slots = self.slots.arrays, self.slots
+        column = lambda name, dtype: slots.per_seed(  # noqa: E731
+            [getattr(c, name) for c in controls], dtype)
+        args = (a.state, slots.per_seed(active, bool), a.bank, a.learned,
+                column("option", jnp.int32), column("start", jnp.int32),
+                column("teleport", bool), column("keep_episodes", bool),
+                column("side_cost", jnp.float32), column("gamma", jnp.float32),
+                (a.window, a.task_window),
+                slots.per_seed([[c.window, c.task_window] for c in controls], jnp.int32))
+        compile_s = 0.0
+        if self.level_program is None:  # one compile serves every level (ids are traced)
+            t0 = time.perf_counter()
+            self.level_program = self.engine.compile("chunk", self.engine.chunk, args,
+                                                     donate=(0,))
+            compile_s = time.perf_counter() - t0
+        state, stats, metrics, (window, task_window), windows = self.level_program(*args)
+        stats, windows = dist.gather((stats, windows))  # [S, U, ...], the same on every process
+        metrics = float64(dist.gather(metrics)) if self.metrics else None
+        if not all_finite(state.learner.params):
+            raise NonFiniteError(f"non-finite learner parameters in {describe()}")
+        slots.arrays = a.replace(state=state, window=window, task_window=task_window)
+        return ChunkOut(stats, windows, metrics), compile_s
+
+    def joint(self, seeds: list[int], side_cost, gammas, sizes, describe):
+        """Joint fine-tuning's chunk for these seeds (the others keep their state)."""
+        a, slots = self.slots.arrays, self.slots
+        args = (a.joint, slots.per_seed([s in seeds for s in range(len(slots))], bool),
+                a.learned, slots.per_seed(side_cost, jnp.float32),
+                slots.per_seed(gammas, jnp.float32), (a.window, a.task_window),
+                slots.per_seed(sizes, jnp.int32))
+        compile_s = 0.0
+        if self.joint_program is None:
+            t0 = time.perf_counter()
+            self.joint_program = self.engine.compile("joint_chunk", self.engine.joint_chunk,
+                                                     args, donate=(0,))
+            compile_s = time.perf_counter() - t0
+        state, stats, metrics, (window, task_window), windows = self.joint_program(*args)
+        stats, windows = dist.gather((stats, windows))
+        if not all_finite(state.learner.params):
+            raise NonFiniteError(f"non-finite learner parameters in {describe()}")
+        slots.arrays = a.replace(joint=state, window=window, task_window=task_window)
+        out = ChunkOut(stats, windows)
+        if self.metrics:  # collectives: every process gathers
+            out = out._replace(joint_metrics=float64(dist.gather(metrics)),
+                               joint_learned=np.asarray(dist.gather(a.learned)))
+        return out, compile_s
+
+
+def float64(metrics: dict) -> dict:
+    """Learner metrics as float64 host arrays (the stages average them)."""
+    return {name: np.asarray(value, np.float64) for name, value in metrics.items()}

@@ -1,0 +1,130 @@
+"""Side jobs of training as hooks of the driver loop (:mod:`smjax.train.loop`).
+
+After every chunk the loop hands each hook a ``ChunkReport`` (the scalars the stages
+logged, where every seed stands, whether a level, turn or phase ended), in the spirit of
+Brax's ``progress_fn``: the loop itself writes and prints nothing, its hooks do. The
+hooks here: TensorBoard (``TensorBoardHook``) and checkpoints (``CheckpointHook``, which
+also restores them); the progress bar is :class:`smjax.train.progress.ProgressBar`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from smjax.core.timeline import TIMELINE
+from smjax.train import checkpoint as ckpt
+from smjax.train import distributed as dist
+from smjax.train.config import RUN_SETTINGS, TrainConfig
+from smjax.train.restorable import check_restorable
+from smjax.train.stages import Scalar, SeedStatus
+from smjax.train.state import TrainArrays, TrainerState
+
+# 2: learner states carry their hyper-parameters (state.hp); 3: success windows are arrays;
+# 4: the levels' bank (fine-tuning hands back the better hierarchy); 5: every step carries
+# a manifest of checksums (the arrays are laid out as in 4)
+CHECKPOINT_FORMAT = 5
+
+
+@dataclass(frozen=True)
+class ChunkReport:
+    """What a chunk did, for the hooks."""
+    chunk: int                  # chunks run so far
+    seconds: float              # the chunk's wall time
+    steps: int                  # env steps it trained (every training seed's)
+    scalars: list[Scalar]       # the stages' numbers, each at its own env step
+    seeds: list[SeedStatus]     # where each seed still training stands now
+    stages_done: int            # (seed, stage) pairs finished
+    stage_ended: bool           # a level, turn or phase ended in this chunk
+
+
+class Hook:
+    """A side job of training; override what it needs."""
+
+    def start(self, trainer) -> None:
+        """Training starts (or resumes) with ``trainer``'s state."""
+
+    def chunk(self, trainer, report: ChunkReport) -> None:
+        """A chunk ran and the stages decided on it."""
+
+    def end(self, trainer) -> None:
+        """Every seed finished training (evaluation follows)."""
+
+
+class TensorBoardHook(Hook):
+    """Every scalar of the stages to TensorBoard event files in ``directory``."""
+
+    def __init__(self, directory: str | Path):
+        from tensorboardX import SummaryWriter
+
+        self.writer = SummaryWriter(str(directory))
+
+    def chunk(self, trainer, report: ChunkReport) -> None:
+        for scalar in report.scalars:
+            self.writer.add_scalar(scalar.name, scalar.value, scalar.step)
+
+    def end(self, trainer) -> None:
+        self.writer.close()
+
+
+class CheckpointHook(Hook):
+    """Checkpoints in ``out_dir`` when a stage ends and every ``cfg.checkpoint_every``
+    seconds; with several processes every process runs it (saving is collective) and
+    process 0 writes. ``run_meta``: the run's identity (what a resume must match)."""
+
+    def __init__(self, out_dir: str | Path, cfg: TrainConfig, run_meta: dict):
+        self.out_dir, self.run_meta, self.every = out_dir, run_meta, cfg.checkpoint_every
+        # the settings a resume starts from unless told otherwise (not the run's identity)
+        self.settings = {k: getattr(cfg, k) for k in RUN_SETTINGS}
+        self.last_save = time.perf_counter()
+
+    def chunk(self, trainer, report: ChunkReport) -> None:
+        if report.stage_ended or self.due():
+            with TIMELINE.span("checkpoint writes"):
+                self.save(trainer)
+
+    def due(self) -> bool:
+        due = time.perf_counter() - self.last_save >= self.every
+        # clocks differ between processes, and saving is collective: process 0 decides
+        return dist.agree(due) if self.every > 0 else due
+
+    def save(self, trainer) -> None:
+        """Checkpoint (collective with several processes: all gather, process 0 writes)."""
+        # trained: every stage is done, so a resume only evaluates and writes results
+        meta = {"host": trainer.state.to_json(), "run": self.run_meta,
+                "settings": self.settings, "format": CHECKPOINT_FORMAT,
+                "trained": not trainer.training()}
+        arrays = dist.gather(trainer.arrays) if dist.is_multiprocess() else trainer.arrays
+        if dist.is_writer():
+            ckpt.save_checkpoint(self.out_dir, trainer.state.chunks, arrays, meta)
+        self.last_save = time.perf_counter()
+
+    def load(self, like: TrainArrays, num_stages: int, window_slots: int,
+             step: str | None = None, checked: tuple[dict, int] | None = None
+             ) -> tuple[TrainArrays, TrainerState] | None:
+        """Process 0's checkpoint (its latest, or ``step``; older formats migrated),
+        verified against its manifest and the plan, the same on every process; ``like``:
+        the run's fresh arrays; ``checked``: ``check_restorable``'s answer where the caller
+        has it. None: no checkpoint."""
+        out_dir = self.out_dir
+        if checked is None:
+            checked = check_restorable(out_dir, step, like.keys.shape[0], num_stages,
+                                       CHECKPOINT_FORMAT)
+        if checked is None:
+            return None
+        info, version = checked
+        host = info["meta"]["host"]
+        stored = like.as_stored(version)
+        if dist.is_multiprocess():
+            stored = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), stored)
+            loaded = (ckpt.load_arrays(out_dir, stored, step, verified=True)
+                      if dist.is_writer() else stored)
+            loaded = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
+        else:
+            loaded = ckpt.load_arrays(out_dir, stored, step, verified=True)
+        arrays = loaded.migrated(host, window_slots, levels_bank=like.levels_bank is not None)
+        return arrays, TrainerState.from_json(host)

@@ -1,0 +1,67 @@
+"""The run's slots and their device state.
+
+A slot is one seed of one sweep point (without a sweep: one seed). ``Slots`` holds, per
+slot, its seed, discount and swept hyper-parameters, and the device state of all slots
+(``TrainArrays``) placed on the training mesh; the stages and the driver loop change that
+state through it.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from smjax.train import distributed as dist
+from smjax.train.seed_arrays import local
+from smjax.train.sharding import seed_sharding, state_shardings
+from smjax.train.state import TrainArrays
+
+
+class Slots:
+    """Per slot: ``seeds``, ``gamma`` and ``hp`` (learner hyper-parameter leaves that
+    differ from the config); ``arrays``: every slot's device state on ``mesh`` (None: one
+    device)."""
+
+    def __init__(self, seeds: list[int], gamma: list[float], hp: dict, mesh, levels: dict):
+        self.seeds, self.gamma, self.hp, self.mesh = list(seeds), list(gamma), hp, mesh
+        self.level_settings = levels
+        self.arrays: TrainArrays | None = None
+
+    def __len__(self) -> int:
+        return len(self.seeds)
+
+    def level_gamma(self, name: str | None, s: int) -> float:
+        """Level ``name``'s own discount (``levels[name]["gamma"]``), else slot ``s``'s
+        (``cfg.gamma``, or its sweep point's)."""
+        return self.level_settings.get(name, {}).get("gamma", self.gamma[s])
+
+    def init_learner(self, engine, keys: jax.Array):
+        """Fresh learners per slot, with each slot's swept hyper-parameters."""
+        learner = engine.init_learner(keys)
+        if self.hp:
+            learner = learner.replace(hp={**learner.hp, **self.hp})
+        return learner
+
+    def set(self, arrays: TrainArrays) -> None:
+        """New device state, put on the mesh (seed axis, then environment axis)."""
+        self.arrays = arrays
+        if self.mesh is not None:
+            shardings = seed_sharding(self.mesh, arrays).replace(
+                state=state_shardings(self.mesh, arrays.state))
+            self.arrays = dist.place(arrays, shardings)
+
+    def local(self) -> TrainArrays:
+        """The device state as arrays this process holds whole (for host-side changes)."""
+        return jax.tree.map(local, self.arrays)
+
+    def small(self, tree):
+        """Small per-call inputs (flags, masks) on the mesh: with several processes every
+        input of a compiled program must be a global array."""
+        if self.mesh is None:
+            return tree
+        return dist.place(tree, seed_sharding(self.mesh, tree))
+
+    def per_seed(self, values, dtype) -> jax.Array:
+        return self.small(jnp.asarray(values, dtype))
+
+    def mask(self, seeds: list[int]) -> jax.Array:
+        return jnp.asarray([s in seeds for s in range(len(self.seeds))])

@@ -1,0 +1,58 @@
+"""The driver loop's side jobs are hooks: a run with its own hooks gets every chunk's report,
+and a run without hooks writes and prints nothing."""
+from hier_env import make_keydoor
+from smjax.agents import make_agent
+from smjax.train import TrainConfig
+from smjax.train.engine import Engine
+from smjax.train.hooks import Hook
+from smjax.train.loop import HierarchyTrainer
+from smjax.train.plans import plan_levels
+
+SMALL = TrainConfig(num_envs=8, rollout_ticks=8, updates_per_chunk=2, success_window=32,
+                    gate_envs=16, eval_envs=16, max_episodes_per_level=150,
+                    finetune_mode="turns", finetune_max_episodes=160, finetune_turn_episodes=80,
+                    finetune_threshold=1.0)
+
+
+class Recorder(Hook):
+    def __init__(self):
+        self.calls, self.reports = [], []
+
+    def start(self, trainer):
+        self.calls.append("start")
+
+    def chunk(self, trainer, report):
+        self.calls.append("chunk")
+        self.reports.append(report)
+
+    def end(self, trainer):
+        self.calls.append("end")
+
+
+def _trainer(hooks, seeds=(0, 1)):
+    env, params = make_keydoor()
+    h = env.hierarchies()["paper"]
+    return HierarchyTrainer(Engine(env, params, h, make_agent("ppo"), SMALL),
+                            plan_levels(h, "top-down"), list(seeds), hooks=hooks)
+
+
+def test_a_hook_gets_every_chunks_report_and_nothing_is_printed(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    recorder = Recorder()
+    trainer = _trainer([recorder])
+    raw = trainer.run()
+    assert recorder.calls[0] == "start" and recorder.calls[-1] == "end"
+    reports = recorder.reports
+    assert [r.chunk for r in reports] == list(range(1, trainer.state.chunks + 1))
+    # every (seed, stage) pair ends once: two levels and fine-tuning for two seeds
+    assert reports[-1].stages_done == 6 and reports[-1].seeds == []
+    assert sum(r.stage_ended for r in reports) >= 3
+    names = {s.name for r in reports for s in r.scalars}
+    assert any(n.endswith("/running_success") for n in names)
+    assert any(n.endswith("/gate_success") for n in names)
+    assert "seed_1/finetune/task_success" in names
+    assert {s.where for r in reports for s in r.seeds} >= {"L1", "L2", "FT"}
+    assert raw["finetune"]["episodes"][0] > 0
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""
+    assert list(tmp_path.iterdir()) == []
