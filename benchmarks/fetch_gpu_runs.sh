@@ -1,37 +1,35 @@
-# Fetch sample complexity on one GPU (benchmarks/RESULTS.md, "Fetch"): the (blocks, method)
-# runs of fetch_sample_complexity.py, one after another (one run alone trains ~11k env
-# steps/s on an H100; two sharing the GPU get ~4k each). JOBS picks runs (default
-# "fl3 td3 fl4 td4"), EXTRA adds flags. Needs the mujoco/mjx/brax wheels in .whl (device README),
-# carried with the call (carry [".whl"]); download them (py 3.12, ~34 MB) with
+#!/usr/bin/env bash
+# Fetch sample complexity on one GPU (benchmarks/RESULTS.md, "Fetch"): the (blocks, method) runs of
+# fetch_sample_complexity.py, one after another (one run alone trains ~11k env steps/s on an H100;
+# two sharing the GPU get ~4k each). JOBS picks runs (default "fl3 td3 fl4 td4"), EXTRA adds flags.
+# Runs from the repository root on any GPU host with smjax's dependencies (MuJoCo MJX, Brax).
+# Optional: a .whl folder of wheels is installed into /tmp/site first (for a host without those
+# packages and without network; download them elsewhere, py 3.12, ~34 MB, with
 #   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
 #     --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 --platform manylinux_2_17_x86_64 \
 #     --platform manylinux2014_x86_64 --platform manylinux1_x86_64 -d .whl mujoco==4.0.0 mujoco-core==4.0.0 \
 #     mujoco-studio==4.0.0 mujoco-mjx==3.17.0 brax==0.14.2 glfw pyopengl trimesh tensorboardx jaxopt \
 #     ml-collections websockets flask flask-cors itsdangerous blinker
+# ).
 #
-# A device call lasts at most 10 minutes but a machine stays up to 30: the first call
-# (MODE=start) detaches the queue with setsid so it runs on between calls; later calls
-# (MODE=status) show progress and copy results to $OUT. MODE=run trains in the
-# foreground, resuming checkpointed runs under runs/gpu (T: time limit per run, seconds).
+# MODE=run trains in the foreground, resuming checkpointed runs under runs/gpu (T: time limit per
+# run, seconds). MODE=start detaches the queue (setsid), so it goes on after the shell that started
+# it ends; MODE=status (the default) shows progress. With OUT set (optional), start and status also
+# pack the results, logs and tables into $OUT/fetch_runs.tgz.
 #
-# Caution: a detached run need not survive between two calls (a call may find a fresh
-# machine), so each call ends with what it needs to continue (HOP=1) rather than relying on
-# the machine staying up.
-#
-# A run longer than one machine (4-block top-down: ~35 min) moves to the next machine at a
-# level boundary. Runs here checkpoint only there (checkpoint_every=1e9), where the checkpoint
-# holds the next level's empty replay buffer and is a few MB. Before the machine goes back,
-# MODE=status HOP=1 also returns each job's latest checkpoint (hop.tgz.part-*); here, in the
-# repo root, `cat /work/.device/N/hop.tgz.part-* | tar xzf -`, then MODE=start JOBS=td4 again
-# with carry [".whl", "runs/gpu/td4"]: it resumes (--resume) where the checkpoint left off.
-# At 128 environments a hop's checkpoint is ~26 MiB, and with the ~34 MiB of wheels and the
-# tree the carry passes the device's 64 MiB limit (the call is refused): move
-# .whl/pyopengl-*.whl aside for the resume call (nothing in smjax, mjx or brax imports it).
+# Moving a run to another machine (a 4-block top-down run takes ~35 min): runs here checkpoint only
+# at level boundaries (checkpoint_every=1e9), where the checkpoint holds the next level's empty
+# replay buffer and is small (a few MB; ~26 MiB at 128 environments). MODE=status HOP=1 with OUT set also
+# writes each job's latest checkpoint to $OUT/hop.tgz.part-*; on the next machine, in the repository
+# root, `cat hop.tgz.part-* | tar xzf -`, then MODE=start JOBS=td4 resumes (--resume) where the
+# checkpoint left off.
 R=runs/gpu
 MODE=${MODE:-status}
 JOBS=${JOBS:-"fl3 td3 fl4 td4"}
 mkdir -p $R
-if [ "$MODE" != status ]; then
+OUT=${OUT:-}; HOP=${HOP:-}; EXTRA=${EXTRA:-}
+if [ -n "$OUT" ]; then mkdir -p "$OUT" && OUT=$(realpath "$OUT"); fi
+if [ "$MODE" != status ] && ls .whl/*.whl >/dev/null 2>&1; then
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit
 fi
 export PYTHONPATH=/tmp/site:$PWD XLA_PYTHON_CLIENT_PREALLOCATE=false PYTHONUNBUFFERED=1
@@ -52,8 +50,8 @@ case $MODE in
   run)   for j in $JOBS; do train $j; done;;
 esac
 cat $R/queue.log 2>/dev/null
-# $OUT takes few files: everything goes back in one archive (results, or the last checkpoint's
-# host state while a run is unfinished, its table, curves and log)
+# with OUT: one archive (results, or the last checkpoint's host state while a run is unfinished,
+# its table, curves and log)
 for f in $JOBS; do
   [ -f $R/$f.log ] || continue
   echo "== $f"; tr '\r' '\n' < $R/$f.log | grep -v -i warp | grep -E "level|it/s|\|" | tail -3

@@ -1,17 +1,24 @@
-# Fetch stack4 on one GPU with the command a user types (configs/fetch_stack4.yaml): the
-# top-down run (td) and the flat baseline at the same settings (flat), one after the other,
-# each resumed from its checkpoint when one is there. A device call lasts at most 10 minutes,
-# so a run longer than that continues in the next call: T bounds each run's seconds (it is
-# interrupted with SIGINT and keeps its last checkpoint, written every CKPT seconds); call
-# again with the same JOBS to go on. On a fresh machine, carry runs/gpu4 (unpack the previous
-# call's hop.tgz.part-* here first: cat /work/.device/N/hop.tgz.part-* | tar xzf -).
-# Needs the mujoco/mjx/brax wheels in .whl (benchmarks/fetch_gpu_runs.sh lists them).
+#!/usr/bin/env bash
+# Fetch stack4 on one GPU with the command a user types (configs/fetch_stack4.yaml): the top-down
+# run (td) and the flat baseline at the same settings (flat), one after the other, each resumed
+# from its checkpoint when one is there. Runs from the repository root on any GPU host with smjax's
+# dependencies (MuJoCo MJX). T (default 540) bounds the seconds of one invocation: a run still
+# going is interrupted with SIGINT and keeps its last checkpoint (written every CKPT seconds,
+# default 120); invoke again with the same JOBS to go on. To go on on another machine, copy
+# runs/gpu4 there (or unpack the hop archive below: `cat hop.tgz.part-* | tar xzf -`).
+# Optional: a .whl folder of wheels (benchmarks/fetch_gpu_runs.sh lists them) is installed into
+# /tmp/site first; with OUT set, $OUT/results.tgz (results and logs) and $OUT/hop.tgz.part-*
+# (runs/gpu4 with its checkpoints, in 15 MB parts) are written at the end.
 R=runs/gpu4
 JOBS=${JOBS:-"td flat"}
 CKPT=${CKPT:-120}
 mkdir -p $R
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
-  .whl/*.whl 2>/dev/null || exit
+OUT=${OUT:-}
+if [ -n "$OUT" ]; then mkdir -p "$OUT" && OUT=$(realpath "$OUT"); fi
+if ls .whl/*.whl >/dev/null 2>&1; then
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
+    .whl/*.whl 2>/dev/null || exit
+fi
 export PYTHONPATH=/tmp/site:$PWD XLA_PYTHON_CLIENT_PREALLOCATE=false PYTHONUNBUFFERED=1
 export JAX_COMPILATION_CACHE_DIR=$PWD/$R/jax_cache
 nvidia-smi --query-gpu=name --format=csv,noheader
@@ -31,7 +38,7 @@ for job in $JOBS; do
   echo "$job exit $? after $(( $(date +%s) - start )) s" | tee -a $R/queue.log
 done
 for job in $JOBS; do echo "== $job"; tr '\r' '\n' < $R/$job.log 2>/dev/null | grep -v -i warp | tail -4; done
-# results, logs and each unfinished run's latest checkpoint, in parts the device returns
+# with OUT: results and logs, and each unfinished run's latest checkpoint in 15 MB parts
 if [ -n "$OUT" ]; then
   tar czf $OUT/results.tgz --exclude='jax_cache' --exclude='checkpoints' $R 2>/dev/null
   (tar cf - --exclude='jax_cache' $R | gzip -1 | split -b 15M - $OUT/hop.tgz.part-) 2>/dev/null

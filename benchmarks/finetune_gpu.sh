@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
-# Fine-tuning runs on one GPU, several at once (the device tool; .whl wheels carried).
+# Fine-tuning runs on one GPU, several at once, from the repository root on any GPU host:
 #   bash benchmarks/finetune_gpu.sh "NAME TASK [train flags...]" "NAME2 TASK2 ..." ...
-# Each run's results.json and curves.csv land in $OUT as NAME.json / NAME.csv, its log
-# (with a `time` line) as log_NAME.txt. SEEDS (default 10) seeds per run.
+# Each run's results.json and curves.csv land in $OUT (default runs/finetune_gpu) as NAME.json /
+# NAME.csv, its log (with a `time` line) as log_NAME.txt. SEEDS (default 10) seeds per run.
+# Optional: where mujoco is not importable and a .whl folder holds wheels, they are installed into
+# /tmp/site first (Fetch needs them; Craft and football do not).
 set -u
-OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/runs
-# (the wheels matter for Fetch only; Craft and football run without them)
-if [ -d .whl ] && ! python3 -c "import mujoco" 2>/dev/null; then
+OUT=${OUT:-runs/finetune_gpu}; mkdir -p "$OUT" /tmp/runs
+if ls .whl/*.whl >/dev/null 2>&1 && ! python3 -c "import mujoco" 2>/dev/null; then
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
     --target /tmp/site .whl/*.whl || exit 1
   export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH}

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Environment throughput on an accelerator: one JSON line per configuration into $OUT/bench.jsonl.
-# Usage: OUT=dir bash benchmarks/gpu_bench.sh   (set WHEN to craft|football|fetch|all)
+# Environment throughput on an accelerator (benchmarks/RESULTS.md, "Environment throughput"): one
+# JSON line per configuration, appended to $OUT/bench.jsonl (default OUT=runs/gpu_bench).
+# Usage: [OUT=dir] [WHAT=craft|football|fetch|all] bash benchmarks/gpu_bench.sh
 set -u
-OUT=${OUT:-out}; mkdir -p "$OUT"; WHAT=${WHAT:-all}
+OUT=${OUT:-runs/gpu_bench}; mkdir -p "$OUT"; WHAT=${WHAT:-all}
 log() { tee -a "$OUT/bench.jsonl"; }
 python3 -c "import smjax, jax; print(jax.__version__, jax.devices())"
 if [ "$WHAT" = all ] || [ "$WHAT" = craft ]; then

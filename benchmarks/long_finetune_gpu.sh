@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
-# Long fine-tuning runs on one GPU that outlast one device call: the first call starts
-# them, a later call on the same warm machine resumes them from their checkpoints.
+# Long fine-tuning runs on one GPU, several at once, in invocations of at most T seconds (default
+# 540): the first starts them, a later one on the same machine (RESUME=1) resumes them from their
+# checkpoints under /tmp/runs. From the repository root on any GPU host:
 #   bash benchmarks/long_finetune_gpu.sh "NAME TASK [train flags...]" ...
-# T (default 540) seconds per call; RESUME=1 to continue. Each run's results.json lands
-# in $OUT as NAME.json (its curves as NAME.csv) once finished, its log as log_NAME.txt
-# (appended per call). Hosts that return only a few files from $OUT lose some of six runs'
-# 18, so at the end they are packed into $OUT/runs.tgz.
+# Each run's results.json lands in $OUT (default runs/long_finetune_gpu) as NAME.json (its curves
+# as NAME.csv) once finished, its log as log_NAME.txt (appended per invocation); at the end they
+# are packed into one archive, $OUT/runs.tgz.
 set -u
-OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/runs
+OUT=${OUT:-runs/long_finetune_gpu}; mkdir -p "$OUT" /tmp/runs
 export XLA_PYTHON_CLIENT_MEM_FRACTION=${XLA_PYTHON_CLIENT_MEM_FRACTION:-$(python3 -c "print(round(0.9 / $#, 3))")}
 pids=()
 for spec in "$@"; do
