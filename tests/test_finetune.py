@@ -16,6 +16,7 @@ from smjax.agents import make_agent
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.run import run
+from smjax.train.hooks import CheckpointHook
 from smjax.train.seed_arrays import freeze
 
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
@@ -175,9 +176,11 @@ def _in_a_second_turn(trainer) -> bool:
 
 
 def test_resume_during_finetuning_is_exact(tmp_path, monkeypatch):
-    # checkpoints at level and turn boundaries only (a save per chunk is slow)
+    # checkpoints at level and turn boundaries only (a save per chunk is slow), every one
+    # written at once (not coalesced with the next), so a turn's start is checkpointed
     cfg = TrainConfig(**(SMALL | {"checkpoint_every": 1e9}))
     straight = run(make_keydoor(), cfg, [0, 1], tmp_path / "straight", progress=False)
+    monkeypatch.setattr(CheckpointHook, "STAGE_GAP_WRITES", 0)
     lose_machine_after_save(monkeypatch, _in_a_second_turn)
     out = tmp_path / "moved"
     with pytest.raises(MachineLost):

@@ -56,3 +56,34 @@ def test_a_hook_gets_every_chunks_report_and_nothing_is_printed(capsys, tmp_path
     out = capsys.readouterr()
     assert out.out == "" and out.err == ""
     assert list(tmp_path.iterdir()) == []
+
+
+def _writes(tmp_path, monkeypatch, gap_writes: float) -> tuple[list, int]:
+    """The chunks the checkpoint hook wrote at (stage ends only: no periodic writes), and
+    how many chunks ended a stage."""
+    from smjax.train.hooks import CheckpointHook
+
+    monkeypatch.setattr(CheckpointHook, "STAGE_GAP_WRITES", gap_writes)
+    written = []
+    save = CheckpointHook.save
+    monkeypatch.setattr(CheckpointHook, "save", lambda hook, trainer: (
+        written.append(trainer.state.chunks), save(hook, trainer)))
+    recorder = Recorder()
+    cfg = SMALL.replace(checkpoint_every=1e9)
+    env, params = make_keydoor()
+    h = env.hierarchies()["paper"]
+    trainer = HierarchyTrainer(
+        Engine(env, params, h, make_agent("ppo"), cfg), plan_levels(h, "top-down"), [0, 1],
+        hooks=[recorder, CheckpointHook(tmp_path, cfg, {})])
+    trainer.run()
+    return written, sum(r.stage_ended for r in recorder.reports)
+
+
+def test_stage_end_checkpoints_are_coalesced_but_the_first_and_last_are_written(
+        tmp_path, monkeypatch):
+    # no gap: a write at every chunk that ended a stage
+    every, ends = _writes(tmp_path / "every", monkeypatch, 0)
+    assert len(every) == ends >= 3
+    # a gap longer than the run: the first stage end and the last are written, nothing between
+    few, _ = _writes(tmp_path / "few", monkeypatch, 1e9)
+    assert few == [every[0], every[-1]]

@@ -97,7 +97,8 @@ class TrainConfig:
       finetune_side_cost_weight: the side cost's weight (1: as the templates declare it).
       level_side_cost_weight: the same shaping while the levels train (0: off).
       checkpoint_every: seconds between checkpoints with an output directory (0: every
-        chunk); a checkpoint is also written at the end of every level.
+        chunk); a checkpoint is also written when a level or turn ends (ends close
+        together share one write: ``smjax.train.hooks.CheckpointHook``).
     """
 
     method: str = "top-down"

@@ -72,18 +72,31 @@ class TensorBoardHook(Hook):
 
 
 class CheckpointHook(Hook):
-    """Checkpoints in ``out_dir`` when a stage ends and every ``cfg.checkpoint_every``
-    seconds; with several processes every process runs it (saving is collective) and
-    process 0 writes. ``run_meta``: the run's identity (what a resume must match)."""
+    """Checkpoints in ``out_dir`` every ``cfg.checkpoint_every`` seconds and when a stage
+    ends; with several processes every process runs it (saving is collective) and process
+    0 writes. ``run_meta``: the run's identity (what a resume must match).
+
+    A stage end is written at once unless a checkpoint was written less than
+    ``STAGE_GAP_WRITES`` times the last write's duration ago; then it is written at the
+    first chunk after that gap. With many seeds, each ending its levels and turns in a
+    chunk of its own, one write then covers several ends, and writes stay a small part of
+    the wall time, while no stage end waits more than the gap for its checkpoint. The
+    last one (every stage done) is always written at once."""
+
+    STAGE_GAP_WRITES = 20
 
     def __init__(self, out_dir: str | Path, cfg: TrainConfig, run_meta: dict):
         self.out_dir, self.run_meta, self.every = out_dir, run_meta, cfg.checkpoint_every
         # the settings a resume starts from unless told otherwise (not the run's identity)
         self.settings = {k: getattr(cfg, k) for k in RUN_SETTINGS}
         self.last_save = time.perf_counter()
+        self.last_write_seconds = 0.0
+        self.wrote_once = False
+        self.stage_pending = False  # a stage ended since the last write
 
     def chunk(self, trainer, report: ChunkReport) -> None:
-        if report.stage_ended or self.due():
+        self.stage_pending |= report.stage_ended
+        if self.due() or (self.stage_pending and self.stage_write_due(trainer)):
             with TIMELINE.span("checkpoint writes"):
                 self.save(trainer)
 
@@ -92,8 +105,16 @@ class CheckpointHook(Hook):
         # clocks differ between processes, and saving is collective: process 0 decides
         return dist.agree(due) if self.every > 0 else due
 
+    def stage_write_due(self, trainer) -> bool:
+        """Whether a stage end's checkpoint is written now (process 0 decides)."""
+        gap = self.STAGE_GAP_WRITES * self.last_write_seconds
+        due = (not trainer.training() or not self.wrote_once
+               or time.perf_counter() - self.last_save >= gap)
+        return dist.agree(due)
+
     def save(self, trainer) -> None:
         """Checkpoint (collective with several processes: all gather, process 0 writes)."""
+        began = time.perf_counter()
         # trained: every stage is done, so a resume only evaluates and writes results
         meta = {"host": trainer.state.to_json(), "run": self.run_meta,
                 "settings": self.settings, "format": CHECKPOINT_FORMAT,
@@ -102,6 +123,8 @@ class CheckpointHook(Hook):
         if dist.is_writer():
             ckpt.save_checkpoint(self.out_dir, trainer.state.chunks, arrays, meta)
         self.last_save = time.perf_counter()
+        self.last_write_seconds = self.last_save - began
+        self.wrote_once, self.stage_pending = True, False
 
     def load(self, like: TrainArrays, num_stages: int, window_slots: int,
              step: str | None = None, checked: tuple[dict, int] | None = None

@@ -138,16 +138,20 @@ class HierarchyTrainer:
             scalars += self.timed("gates", self.decide, training, controls, ends)
             st.wall_seconds = time.perf_counter() - t_start
             if ends:
-                for stage in self.stages:
-                    stage.finish(st, ends, [c.option for c in controls])
-                # started before the hooks run, so a checkpoint holds the fresh learners
-                # (an empty replay buffer compresses to nothing), not the finished ones
-                self.start([s for s in ends.levels + ends.turns
-                            if st.stage[s] < self.num_stages])
+                self.timed("level and turn changes", self.change, ends, controls)
             self.report(seconds, scalars, bool(ends))
         for hook in self.hooks:
             hook.end(self)
         return self.timed("evaluation", self.evaluate, t_start)
+
+    def change(self, ends: Ends, controls: list[SeedControls]) -> None:
+        """The ended seeds' stages finished, their next ones started."""
+        st = self.state
+        for stage in self.stages:
+            stage.finish(st, ends, [c.option for c in controls])
+        # started before the hooks run, so a checkpoint holds the fresh learners
+        # (an empty replay buffer compresses to nothing), not the finished ones
+        self.start([s for s in ends.levels + ends.turns if st.stage[s] < self.num_stages])
 
     def training(self) -> list[int]:
         """Seeds that still have a stage to train."""
