@@ -160,7 +160,7 @@ def test_reward_info_truncation_and_checkpoints():
     pos[11] = (-0.9, 0.0)
     s = scene(pos, owner=1).replace(step=jnp.int32(0))
     acts = jnp.zeros((11,), jnp.int32).at[1].set(C.SHOT)
-    total, paid = 0.0, []
+    total = 0.0
     step = jax.jit(env.step_env)
     for t in range(12):
         obs, s, r, term, trunc, info = step(jax.random.PRNGKey(t), s, acts, params)
