@@ -10,8 +10,8 @@ episode end. A decision still open at the rollout end is not trained here (the c
 carries it into the next rollout, see :mod:`smjax.agents.smdp`); the decisions before it
 bootstrap from the critic's value of its state (``bootstrap_at_rollout_end=True``) or
 from 0 (the reference updated only after whole episodes, so it never needed either).
-One gradient step per ``update`` call; the reference updated once per 20 episodes, which the trainer reproduces by choosing the
-rollout length.
+One gradient step per ``update`` call; the reference updated once per 20 episodes, which
+the trainer reproduces by choosing the rollout length.
 
 Every loss is a mean over decision ticks: ``-log pi(a|s) * (G - V(s))`` (baseline held
 fixed), ``vf_coef * 0.5 * (G - V(s))**2``, minus ``ent_coef * entropy``.

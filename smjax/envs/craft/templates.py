@@ -18,8 +18,8 @@ Two additions of smjax's (docs/environments.md, Craft templates):
 * A treasure behind its barrier (gold in water, a gem in stone): the barrier cells next to
   it are stand cells too, and the teleport clears the one it stands in, which is where
   the learned ``give_gold`` ends (it crosses the water with a bridge). By the reference's
-  rule the teleport does nothing until the water is crossed, so a task with gold as an
-  ingredient (make_goldarrow) left its root no way to get the gold.
+  rule the teleport would do nothing until the water is crossed, which would leave a
+  task with gold as an ingredient (make_goldarrow) no way for its root to get the gold.
 """
 from __future__ import annotations
 
