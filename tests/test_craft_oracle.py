@@ -27,7 +27,7 @@ def _run(state, params):
 
     def body(c):
         s, _, stuck = c
-        action, info = O._decide_traced(s, params.goal)
+        action, info = O.oracle_decide_traced(s, params.goal)
         s = dynamics.transition(s, action)
         _, term, trunc = dynamics.reward_and_done(s, params)
         return s, term | trunc, stuck | info["stuck"]
@@ -113,7 +113,7 @@ def _jit_new_state(task):
 
 
 _act = jax.jit(lambda s, p: O.oracle_action(s, p))
-_decide = jax.jit(lambda s, p: O._decide_traced(s, p.goal))
+_decide = jax.jit(lambda s, p: O.oracle_decide_traced(s, p.goal))
 _step = jax.jit(dynamics.transition)
 
 

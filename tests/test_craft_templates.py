@@ -159,7 +159,7 @@ def test_counted_teleport_holds_the_promised_count(name, held):
 def test_recipe_children_promise_what_one_use_needs():
     # In every recipe hierarchy, holding what an option's give children promise and USEing
     # its workshop yields the option's item (multi-fire USE included).
-    from smjax.envs.craft.oracle import _fire_np
+    from smjax.envs.craft.recipe_plan import fire_recipes_np
     for task in C.TASKS:
         h = smjax.make(f"craft/{task}", observation="none")[0].hierarchies()["recipe"]
         for option, kids in h.children.items():
@@ -171,7 +171,7 @@ def test_recipe_children_promise_what_one_use_needs():
                 if kid.startswith("give_"):
                     what, n = C.give_target(kid)
                     inv[C.KIND_ID[what]] = n
-            assert _fire_np(inv, C.WORKSHOP_OF[item])[C.KIND_ID[item]] >= 1, (task, option, kids)
+            assert fire_recipes_np(inv, C.WORKSHOP_OF[item])[C.KIND_ID[item]] >= 1, (task, option, kids)
     flag = smjax.make("craft/make_flag")[0].hierarchies()["recipe"]
     prims = tuple(C.ACTION_NAMES)
     assert flag.children["make_flag"] == ("give_stick_x2", "give_cloth", "give_iron_x2") + prims

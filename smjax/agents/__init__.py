@@ -55,4 +55,5 @@ def make_agent(algo: str, layout: Sequence = (), **config_overrides: Any) -> Age
 __all__ = [
     "ALGOS", "make_agent", "make_config", "default_config", "Agent", "ActOutput", "Transition",
     "PPOConfig", "DQNConfig", "ActorCriticConfig", "smdp_gae", "smdp_transitions",
+    "carry_pending", "no_pending",
 ]

@@ -10,14 +10,15 @@ episode end. A decision still open at the rollout end is not trained here (the c
 carries it into the next rollout, see :mod:`smjax.agents.smdp`); the decisions before it
 bootstrap from the critic's value of its state (``bootstrap_at_rollout_end=True``) or
 from 0 (the reference updated only after whole episodes, so it never needed either).
-One gradient step per ``update`` call; the reference updated once per 20 episodes, which the trainer reproduces by choosing the
-rollout length.
+One gradient step per ``update`` call; the reference updated once per 20 episodes, which
+the trainer reproduces by choosing the rollout length.
 
 Every loss is a mean over decision ticks: ``-log pi(a|s) * (G - V(s))`` (baseline held
 fixed), ``vf_coef * 0.5 * (G - V(s))**2``, minus ``ent_coef * entropy``.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import jax
@@ -104,62 +105,9 @@ def make_agent(config: ActorCriticConfig | None = None, layout=()) -> Agent:
     def policy_logits(params, obs: jax.Array) -> jax.Array:
         return logits_of(network_for, params, obs)
 
-    def loss_fn(params, obs, action, mask, returns, weight, hp):
-        logits, value = network_for(mask.shape[-1]).apply(params, obs)
-        log_prob = take_action(masked_log_softmax(logits, mask), action)
-        advantage = jax.lax.stop_gradient(returns - value)
-        if config.normalize_advantages:
-            mean = masked_mean(advantage, weight)
-            std = jnp.sqrt(masked_mean(jnp.square(advantage - mean), weight))
-            advantage = (advantage - mean) / (std + 1e-8)
-        policy_loss = masked_mean(-log_prob * advantage, weight)
-        value_loss = 0.5 * masked_mean(jnp.square(value - returns), weight)
-        entropy = masked_mean(masked_entropy(logits, mask), weight)
-        total = policy_loss + hp["vf_coef"] * value_loss - hp["ent_coef"] * entropy
-        return total, {"policy_loss": policy_loss, "value_loss": value_loss, "entropy": entropy}
-
     def update(state: PolicyGradientState, traj: Transition, key: jax.Array):
         del key  # the update is deterministic given the rollout
-        traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
-        num_ticks, num_envs = traj.reward.shape[:2]
-        decision = traj.decision.astype(bool)
-        _, returns = smdp_gae(traj.reward, traj.discount, traj.done, decision,
-                              jnp.where(decision, traj.value, 0.0), 1.0,
-                              bootstrap=config.bootstrap_at_rollout_end)
-        episodes = episodes_with_decision(traj.done, decision)
-        decision = complete_decisions(traj.done, decision)
-        num_items = num_ticks * num_envs
-        obs = flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1)
-        action = jnp.where(decision, traj.action, 0).reshape(num_items).astype(jnp.int32)
-        mask = traj.action_mask.reshape(num_items, -1).astype(bool)
-        weight = decision.reshape(num_items)
-        (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(
-            state.params, obs, action, mask, returns.reshape(num_items), weight, state.hp)
-        updates, new_opt_state = optimizer.update(grads, state.opt_state, state.params)
-        updates = scale_by_lr(updates, state.hp["learning_rate"])
-        new_params = optax.apply_updates(state.params, updates)
-        # With no decision in the rollout there is nothing to learn; do not let Adam's
-        # moments drift on a zero gradient.
-        has_decision = jnp.any(decision)
-        params, opt_state = jax.tree.map(
-            lambda n, o: jnp.where(has_decision, n, o),
-            (new_params, new_opt_state), (state.params, state.opt_state))
-        num_decisions = decision.sum().astype(jnp.int32)
-        new_state = PolicyGradientState(
-            params=params,
-            opt_state=opt_state,
-            grad_steps=state.grad_steps + has_decision.astype(jnp.int32),
-            updates=state.updates + 1,
-            episodes_seen=state.episodes_seen + episodes,
-            decisions_seen=state.decisions_seen + num_decisions,
-            hp=state.hp,
-        )
-        metrics = dict(aux, total_loss=total, decisions=num_decisions,
-                       mean_return=masked_mean(returns, decision),
-                       episodes_seen=new_state.episodes_seen,
-                       epsilon=exploration_epsilon(config, new_state.episodes_seen),
-                       grad_steps=new_state.grad_steps)
-        return new_state, metrics
+        return reinforce_update(config, network_for, optimizer, state, traj)
 
     def warm_start(state: PolicyGradientState, params) -> PolicyGradientState:
         # exploration at the end of its decay, as the trained policy left it
@@ -168,3 +116,66 @@ def make_agent(config: ActorCriticConfig | None = None, layout=()) -> Agent:
 
     return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start,
                  SWEEPABLE)
+
+
+def reinforce_loss(config: ActorCriticConfig, network_for, params, obs, action, mask, returns,
+                   weight, hp):
+    """(total loss, its terms) over the decisions ``weight`` marks (see the module docstring)."""
+    logits, value = network_for(mask.shape[-1]).apply(params, obs)
+    log_prob = take_action(masked_log_softmax(logits, mask), action)
+    advantage = jax.lax.stop_gradient(returns - value)
+    if config.normalize_advantages:
+        mean = masked_mean(advantage, weight)
+        std = jnp.sqrt(masked_mean(jnp.square(advantage - mean), weight))
+        advantage = (advantage - mean) / (std + 1e-8)
+    policy_loss = masked_mean(-log_prob * advantage, weight)
+    value_loss = 0.5 * masked_mean(jnp.square(value - returns), weight)
+    entropy = masked_mean(masked_entropy(logits, mask), weight)
+    total = policy_loss + hp["vf_coef"] * value_loss - hp["ent_coef"] * entropy
+    return total, {"policy_loss": policy_loss, "value_loss": value_loss, "entropy": entropy}
+
+
+def reinforce_update(config: ActorCriticConfig, network_for, optimizer,
+                     state: PolicyGradientState, traj: Transition):
+    """One gradient step on the rollout's complete decisions: (new state, metrics)."""
+    traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
+    num_ticks, num_envs = traj.reward.shape[:2]
+    decision = traj.decision.astype(bool)
+    _, returns = smdp_gae(traj.reward, traj.discount, traj.done, decision,
+                          jnp.where(decision, traj.value, 0.0), 1.0,
+                          bootstrap=config.bootstrap_at_rollout_end)
+    episodes = episodes_with_decision(traj.done, decision)
+    decision = complete_decisions(traj.done, decision)
+    num_items = num_ticks * num_envs
+    obs = flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1)
+    action = jnp.where(decision, traj.action, 0).reshape(num_items).astype(jnp.int32)
+    mask = traj.action_mask.reshape(num_items, -1).astype(bool)
+    weight = decision.reshape(num_items)
+    loss_fn = functools.partial(reinforce_loss, config, network_for)
+    (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(
+        state.params, obs, action, mask, returns.reshape(num_items), weight, state.hp)
+    updates, new_opt_state = optimizer.update(grads, state.opt_state, state.params)
+    updates = scale_by_lr(updates, state.hp["learning_rate"])
+    new_params = optax.apply_updates(state.params, updates)
+    # With no decision in the rollout there is nothing to learn; do not let Adam's
+    # moments drift on a zero gradient.
+    has_decision = jnp.any(decision)
+    params, opt_state = jax.tree.map(
+        lambda n, o: jnp.where(has_decision, n, o),
+        (new_params, new_opt_state), (state.params, state.opt_state))
+    num_decisions = decision.sum().astype(jnp.int32)
+    new_state = PolicyGradientState(
+        params=params,
+        opt_state=opt_state,
+        grad_steps=state.grad_steps + has_decision.astype(jnp.int32),
+        updates=state.updates + 1,
+        episodes_seen=state.episodes_seen + episodes,
+        decisions_seen=state.decisions_seen + num_decisions,
+        hp=state.hp,
+    )
+    metrics = dict(aux, total_loss=total, decisions=num_decisions,
+                   mean_return=masked_mean(returns, decision),
+                   episodes_seen=new_state.episodes_seen,
+                   epsilon=exploration_epsilon(config, new_state.episodes_seen),
+                   grad_steps=new_state.grad_steps)
+    return new_state, metrics

@@ -16,6 +16,7 @@ stored once complete, with its true next decision state and mask.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -155,6 +156,18 @@ def smdp_td_targets(q_next_online, q_next_target, reward, discount, terminal, ne
     return reward + discount * (1.0 - terminal.astype(jnp.float32)) * q_next
 
 
+def empty_buffer(capacity: int, example_obs: jax.Array, num_actions: int) -> ReplayBuffer:
+    """A replay buffer of ``capacity`` zero rows, every next action allowed."""
+    obs_buf = jnp.zeros((capacity,) + example_obs.shape, example_obs.dtype)
+    return ReplayBuffer(
+        obs=obs_buf, action=jnp.zeros((capacity,), jnp.int32),
+        reward=jnp.zeros((capacity,), jnp.float32), discount=jnp.zeros((capacity,), jnp.float32),
+        terminal=jnp.zeros((capacity,), bool), next_obs=obs_buf,
+        next_mask=jnp.ones((capacity, int(num_actions)), bool),
+        size=jnp.zeros((), jnp.int32), insert_pos=jnp.zeros((), jnp.int32),
+    )
+
+
 def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
     """``layout``: the observation's grids, read by a "conv" torso (``ppo.make_agent``)."""
     config = DQNConfig() if config is None else config
@@ -174,14 +187,7 @@ def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
         num_actions = checks.check_num_actions(num_actions)
         example_obs = jnp.asarray(example_obs)
         params = network_for(num_actions).init(key, flatten_obs(example_obs[None]))
-        cap = config.buffer_capacity
-        obs_buf = jnp.zeros((cap,) + example_obs.shape, example_obs.dtype)
-        buffer = ReplayBuffer(
-            obs=obs_buf, action=jnp.zeros((cap,), jnp.int32), reward=jnp.zeros((cap,), jnp.float32),
-            discount=jnp.zeros((cap,), jnp.float32), terminal=jnp.zeros((cap,), bool),
-            next_obs=obs_buf, next_mask=jnp.ones((cap, int(num_actions)), bool),
-            size=jnp.zeros((), jnp.int32), insert_pos=jnp.zeros((), jnp.int32),
-        )
+        buffer = empty_buffer(config.buffer_capacity, example_obs, num_actions)
         zero = jnp.zeros((), jnp.int32)
         return DQNState(params, params, optimizer.init(params), buffer, zero, zero, zero, zero,
                         hyper_params(config, SWEEPABLE))
@@ -197,79 +203,10 @@ def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
         value = jnp.max(masked_logits(q, mask), axis=-1)
         return ActOutput(action, log_prob, value)
 
-    def loss_fn(params, target_params, batch):
-        q = take_action(q_values(params, batch["obs"]), batch["action"])
-        q_next_target = q_values(target_params, batch["next_obs"])
-        q_next_online = q_values(params, batch["next_obs"]) if config.double_dqn else q_next_target
-        target = jax.lax.stop_gradient(smdp_td_targets(
-            q_next_online, q_next_target, batch["reward"], batch["discount"], batch["terminal"],
-            batch["next_mask"], config.double_dqn))
-        td = q - target
-        per_item = optax.huber_loss(q, target) if config.huber_loss else 0.5 * jnp.square(td)
-        return per_item.mean(), (q.mean(), jnp.abs(td).mean())
-
-    def gradient_step(state: DQNState, key: jax.Array):
-        buffer = state.buffer
-        ready = buffer.size >= jnp.maximum(config.learning_starts, 1)
-        idx = jax.random.randint(key, (config.batch_size,), 0, jnp.maximum(buffer.size, 1))
-        batch = {name: getattr(buffer, name)[idx] for name in
-                 ("obs", "action", "reward", "discount", "terminal", "next_obs", "next_mask")}
-        (loss, (mean_q, td_abs)), grads = jax.value_and_grad(loss_fn, has_aux=True)(
-            state.params, state.target_params, batch)
-        updates, opt_state = optimizer.update(grads, state.opt_state, state.params)
-        updates = scale_by_lr(updates, state.hp["learning_rate"])
-        params = optax.apply_updates(state.params, updates)
-        grad_steps = state.grad_steps + 1
-        period = jnp.round(state.hp["target_update_period"]).astype(jnp.int32)
-        sync = grad_steps % period == 0
-        tau = state.hp["tau"]
-        target = jax.tree.map(
-            lambda t, p: jnp.where(sync, tau * p + (1.0 - tau) * t, t),
-            state.target_params, params)
-        # Before learning_starts nothing changes (the buffer is still filling). Select only
-        # the learned parts: a select over the buffer would copy it on every step.
-        params, target, opt_state, grad_steps = jax.tree.map(
-            lambda n, o: jnp.where(ready, n, o),
-            (params, target, opt_state, grad_steps),
-            (state.params, state.target_params, state.opt_state, state.grad_steps))
-        new_state = state.replace(params=params, target_params=target, opt_state=opt_state,
-                                  grad_steps=grad_steps)
-        metrics = {"loss": loss, "mean_q": mean_q, "td_error_abs": td_abs,
-                   "stepped": ready.astype(jnp.float32)}
-        return new_state, metrics
-
     def update(state: DQNState, traj: Transition, key: jax.Array):
-        traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
-        num_ticks, num_envs = traj.reward.shape[:2]
-        num_items = num_ticks * num_envs
-        decision = traj.decision.astype(bool)
-        tr = smdp_transitions(traj.reward, traj.discount, traj.done, decision,
-                              traj.obs, traj.action_mask)
-        flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
-        items = {"obs": flat(traj.obs), "action": flat(traj.action),
-                 "reward": flat(tr.reward) * state.hp["reward_scale"], "discount": flat(tr.discount),
-                 "terminal": flat(tr.terminal), "next_obs": flat(tr.next_obs),
-                 "next_mask": flat(tr.next_mask)}
-        num_decisions = tr.valid.sum().astype(jnp.int32)  # each counted once, when complete
-        state = state.replace(
-            buffer=insert(state.buffer, items, flat(tr.valid)),
-            decisions_seen=state.decisions_seen + num_decisions,
-            episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
-            updates=state.updates + 1,
-        )
-        keys = jax.random.split(key, config.gradient_steps_per_update)
-        state, step_metrics = jax.lax.scan(gradient_step, state, keys)
-        stepped = step_metrics.pop("stepped")
-        denom = jnp.maximum(stepped.sum(), 1.0)
-        metrics = {name: jnp.sum(v * stepped) / denom for name, v in step_metrics.items()}
-        metrics.update(
-            decisions=num_decisions,
-            buffer_size=state.buffer.size,
-            epsilon=linear_epsilon(config, state.hp, state.grad_steps, state.decisions_seen),
-            episodes_seen=state.episodes_seen,
-            grad_steps=state.grad_steps,
-        )
-        return state, metrics
+        loss_fn = functools.partial(td_loss, config, q_values)
+        step = functools.partial(gradient_step, config, optimizer, loss_fn)
+        return dqn_update(config, step, state, traj, key)
 
     def policy_logits(params, obs: jax.Array) -> jax.Array:
         return q_values(params, obs)
@@ -281,3 +218,83 @@ def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
                              grad_steps=jnp.maximum(state.grad_steps, seen))
 
     return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start, SWEEPABLE)
+
+
+def td_loss(config: DQNConfig, q_values, params, target_params, batch):
+    """(loss, (mean Q, mean |TD error|)) of a sampled minibatch ``batch``."""
+    q = take_action(q_values(params, batch["obs"]), batch["action"])
+    q_next_target = q_values(target_params, batch["next_obs"])
+    q_next_online = q_values(params, batch["next_obs"]) if config.double_dqn else q_next_target
+    target = jax.lax.stop_gradient(smdp_td_targets(
+        q_next_online, q_next_target, batch["reward"], batch["discount"], batch["terminal"],
+        batch["next_mask"], config.double_dqn))
+    td = q - target
+    per_item = optax.huber_loss(q, target) if config.huber_loss else 0.5 * jnp.square(td)
+    return per_item.mean(), (q.mean(), jnp.abs(td).mean())
+
+
+def gradient_step(config: DQNConfig, optimizer, loss_fn, state: DQNState, key: jax.Array):
+    """One step on a minibatch drawn from the buffer (none before ``learning_starts``)."""
+    buffer = state.buffer
+    ready = buffer.size >= jnp.maximum(config.learning_starts, 1)
+    idx = jax.random.randint(key, (config.batch_size,), 0, jnp.maximum(buffer.size, 1))
+    batch = {name: getattr(buffer, name)[idx] for name in
+             ("obs", "action", "reward", "discount", "terminal", "next_obs", "next_mask")}
+    (loss, (mean_q, td_abs)), grads = jax.value_and_grad(loss_fn, has_aux=True)(
+        state.params, state.target_params, batch)
+    updates, opt_state = optimizer.update(grads, state.opt_state, state.params)
+    updates = scale_by_lr(updates, state.hp["learning_rate"])
+    params = optax.apply_updates(state.params, updates)
+    grad_steps = state.grad_steps + 1
+    period = jnp.round(state.hp["target_update_period"]).astype(jnp.int32)
+    sync = grad_steps % period == 0
+    tau = state.hp["tau"]
+    target = jax.tree.map(
+        lambda t, p: jnp.where(sync, tau * p + (1.0 - tau) * t, t),
+        state.target_params, params)
+    # Before learning_starts nothing changes (the buffer is still filling). Select only
+    # the learned parts: a select over the buffer would copy it on every step.
+    params, target, opt_state, grad_steps = jax.tree.map(
+        lambda n, o: jnp.where(ready, n, o),
+        (params, target, opt_state, grad_steps),
+        (state.params, state.target_params, state.opt_state, state.grad_steps))
+    new_state = state.replace(params=params, target_params=target, opt_state=opt_state,
+                              grad_steps=grad_steps)
+    metrics = {"loss": loss, "mean_q": mean_q, "td_error_abs": td_abs,
+               "stepped": ready.astype(jnp.float32)}
+    return new_state, metrics
+
+
+def dqn_update(config: DQNConfig, step, state: DQNState, traj: Transition, key: jax.Array):
+    """Store the rollout's complete decisions, then ``gradient_steps_per_update`` ``step``s."""
+    traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
+    num_ticks, num_envs = traj.reward.shape[:2]
+    num_items = num_ticks * num_envs
+    decision = traj.decision.astype(bool)
+    tr = smdp_transitions(traj.reward, traj.discount, traj.done, decision,
+                          traj.obs, traj.action_mask)
+    flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
+    items = {"obs": flat(traj.obs), "action": flat(traj.action),
+             "reward": flat(tr.reward) * state.hp["reward_scale"], "discount": flat(tr.discount),
+             "terminal": flat(tr.terminal), "next_obs": flat(tr.next_obs),
+             "next_mask": flat(tr.next_mask)}
+    num_decisions = tr.valid.sum().astype(jnp.int32)  # each counted once, when complete
+    state = state.replace(
+        buffer=insert(state.buffer, items, flat(tr.valid)),
+        decisions_seen=state.decisions_seen + num_decisions,
+        episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
+        updates=state.updates + 1,
+    )
+    keys = jax.random.split(key, config.gradient_steps_per_update)
+    state, step_metrics = jax.lax.scan(step, state, keys)
+    stepped = step_metrics.pop("stepped")
+    denom = jnp.maximum(stepped.sum(), 1.0)
+    metrics = {name: jnp.sum(v * stepped) / denom for name, v in step_metrics.items()}
+    metrics.update(
+        decisions=num_decisions,
+        buffer_size=state.buffer.size,
+        epsilon=linear_epsilon(config, state.hp, state.grad_steps, state.decisions_seen),
+        episodes_seen=state.episodes_seen,
+        grad_steps=state.grad_steps,
+    )
+    return state, metrics

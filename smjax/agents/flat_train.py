@@ -41,6 +41,33 @@ class FlatTrainConfig:
         return self.num_envs * self.num_steps * self.num_updates
 
 
+def trainable_actions(env: Any, env_params: Any, agent: Agent) -> int:
+    """The number of actions of ``env``'s single Discrete action space; ValueError where
+    flat training cannot run (another action space, a recurrent learner)."""
+    space = env.action_space(env_params)
+    if not isinstance(space, spaces.Discrete) or space.shape != ():
+        raise ValueError(f"flat training needs a single Discrete action space, got {space!r}")
+    if agent.hidden_size:
+        raise ValueError("flat_train runs memoryless learners only; a recurrent learner "
+                         f"(hidden_size {agent.hidden_size}) trains through smjax.train "
+                         "(`smjax train ... --method flat`)")
+    return space.n
+
+
+def finished_episodes(finished: jax.Array, ep_return: jax.Array, ep_length: jax.Array) -> dict:
+    """Mean return and length of the episodes ``finished`` marks (NaN where none), and
+    their count."""
+    count = finished.sum()
+    safe = jnp.maximum(count, 1)
+    return dict(
+        mean_episode_return=jnp.where(
+            count > 0, jnp.sum(jnp.where(finished, ep_return, 0.0)) / safe, jnp.nan),
+        mean_episode_length=jnp.where(
+            count > 0, jnp.sum(jnp.where(finished, ep_length, 0)) / safe, jnp.nan),
+        episodes=count.astype(jnp.int32),
+    )
+
+
 def make_train(
     config: FlatTrainConfig, env: Any, env_params: Any, agent: Agent
 ) -> Callable[[jax.Array], tuple[Any, dict]]:
@@ -50,14 +77,7 @@ def make_train(
     that finished during that update's rollout (NaN when none finished);
     ``metrics["episodes"]`` counts them. The agent's own update metrics are included.
     """
-    space = env.action_space(env_params)
-    if not isinstance(space, spaces.Discrete) or space.shape != ():
-        raise ValueError(f"flat training needs a single Discrete action space, got {space!r}")
-    num_actions = space.n
-    if agent.hidden_size:
-        raise ValueError("flat_train runs memoryless learners only; a recurrent learner "
-                         f"(hidden_size {agent.hidden_size}) trains through smjax.train "
-                         "(`smjax train ... --method flat`)")
+    num_actions = trainable_actions(env, env_params, agent)
     stats_env = EpisodeStatistics(env)
 
     def train(key: jax.Array):
@@ -90,17 +110,7 @@ def make_train(
             key, key_update = jax.random.split(key)
             traj, pending = carry_pending(pending, traj)
             agent_state, metrics = agent.update(agent_state, traj, key_update)
-            finished, ep_return, ep_length = episode
-            count = finished.sum()
-            safe = jnp.maximum(count, 1)
-            metrics = dict(
-                metrics,
-                mean_episode_return=jnp.where(
-                    count > 0, jnp.sum(jnp.where(finished, ep_return, 0.0)) / safe, jnp.nan),
-                mean_episode_length=jnp.where(
-                    count > 0, jnp.sum(jnp.where(finished, ep_length, 0)) / safe, jnp.nan),
-                episodes=count.astype(jnp.int32),
-            )
+            metrics = dict(metrics, **finished_episodes(*episode))
             return (agent_state, env_state, obs, pending, key), metrics
 
         start = (agent_state, env_state, obs, no_pending(obs, num_actions), key)

@@ -10,7 +10,7 @@ most one padded block per option), not a static worst case. Under ``vmap`` (seed
 loop runs as often as the seed with the most blocks needs.
 
 Why blocks and not ``jax.lax.ragged_dot``: on XLA:CPU a ragged product over 5 groups
-took longer than the dense product of every row with every group's weights.
+takes longer than the dense product of every row with every group's weights.
 """
 from __future__ import annotations
 

@@ -16,6 +16,7 @@ discounts has a single place to read it from.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -260,59 +261,8 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
             params, flatten_obs(obs), hidden)
         return logits, hidden
 
-    def loss_fn(params, batch, hp):
-        mask = batch[2]
-        if memory:  # [T, B_mb, ...] sequences: whole rollouts of some environments
-            logits, value = unroll(network_for(mask.shape[-1]), params, batch[0])
-        else:       # [N] ticks
-            logits, value = network_for(mask.shape[-1]).apply(params, batch[0])
-        return loss_terms(config, logits, value, batch[1:], hp)
-
     def update(state: PolicyGradientState, traj: Transition, key: jax.Array):
-        traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
-        num_ticks, num_envs = traj.reward.shape[:2]
-        num_items = num_ticks * num_envs
-        # Train on complete decisions; a pending one returns in the next rollout (smdp.py).
-        fields, episodes = decision_data(config, traj, state.hp)
-        obs = flatten_obs(traj.obs, batch_dims=2)
-        if memory:  # the unroll also needs the memory, decided and done of every tick
-            obs = (obs, traj.hidden.astype(jnp.float32), traj.decision.astype(bool),
-                   traj.done.astype(bool))
-        data = (obs,) + fields
-        if memory:  # minibatches are sets of environments, each with its whole rollout
-            take = lambda x, idx: x[:, idx]  # noqa: E731
-            weight_of = lambda w, real: w & real[None, :]  # noqa: E731
-        else:       # minibatches are sets of ticks
-            data = jax.tree.map(lambda x: x.reshape((num_items,) + x.shape[2:]), data)
-            take = lambda x, idx: x[idx]  # noqa: E731
-            weight_of = lambda w, real: w & real  # noqa: E731
-
-        def minibatch_step(carry, mb):
-            params, opt_state, grad_steps, stopped = carry
-            idx, real = mb
-            batch = jax.tree.map(lambda x: take(x, idx), data)
-            batch = batch[:-1] + (weight_of(batch[-1], real),)
-            (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, state.hp)
-            updates, new_opt_state = optimizer.update(grads, opt_state, params)
-            updates = scale_by_lr(updates, state.hp["learning_rate"])
-            new_params = optax.apply_updates(params, updates)
-            has_decision = jnp.any(batch[-1])
-            stopped = kl_stop(stopped, has_decision, aux["approx_kl"], state.hp)
-            step = has_decision & ~stopped
-            params, opt_state = apply_if(step, (new_params, new_opt_state), (params, opt_state))
-            aux = dict(aux, total_loss=total, counted=has_decision.astype(jnp.float32))
-            return (params, opt_state, grad_steps + step.astype(jnp.int32), stopped), aux
-
-        def epoch_step(carry, epoch_key):
-            # environments are dealt like ticks whose every one holds a decision
-            deal = jnp.ones((num_envs,), bool) if memory else data[-1]
-            idx, real = minibatch_indices(epoch_key, deal, config.num_minibatches)
-            return jax.lax.scan(minibatch_step, carry, (idx, real))
-
-        carry = (state.params, state.opt_state, state.grad_steps, jnp.zeros((), bool))
-        epoch_keys = jax.random.split(key, config.update_epochs)
-        (params, opt_state, grad_steps, stopped), aux = jax.lax.scan(epoch_step, carry, epoch_keys)
-        return finish(state, params, opt_state, grad_steps, stopped, aux, episodes, fields)
+        return ppo_update(config, network_for, optimizer, state, traj, key)
 
     if memory:
         return Agent("ppo", init, act_recurrent, update, policy_logits_recurrent,
@@ -322,3 +272,72 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
     return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE,
                  update_options=make_update_options(config, network_for, optimizer,
                                                     config.option_block) if grouped else None)
+
+
+def ppo_loss(config: PPOConfig, network_for, params, batch, hp):
+    """PPO's loss on one minibatch ``batch`` (``ppo_update``'s data, taken at its rows)."""
+    mask = batch[2]
+    if config.recurrent_size:  # [T, B_mb, ...] sequences: whole rollouts of some environments
+        logits, value = unroll(network_for(mask.shape[-1]), params, batch[0])
+    else:       # [N] ticks
+        logits, value = network_for(mask.shape[-1]).apply(params, batch[0])
+    return loss_terms(config, logits, value, batch[1:], hp)
+
+
+def minibatch_source(traj: Transition, fields: tuple, memory: int):
+    """(data, take, weight_of): the update's arrays, how a minibatch takes its rows
+    ``take(x, idx)``, and its decision weights ``weight_of(w, real)`` without padding."""
+    num_ticks, num_envs = traj.reward.shape[:2]
+    num_items = num_ticks * num_envs
+    obs = flatten_obs(traj.obs, batch_dims=2)
+    if memory:  # the unroll also needs the memory, decided and done of every tick
+        obs = (obs, traj.hidden.astype(jnp.float32), traj.decision.astype(bool),
+               traj.done.astype(bool))
+    data = (obs,) + fields
+    if memory:  # minibatches are sets of environments, each with its whole rollout
+        take = lambda x, idx: x[:, idx]  # noqa: E731
+        weight_of = lambda w, real: w & real[None, :]  # noqa: E731
+    else:       # minibatches are sets of ticks
+        data = jax.tree.map(lambda x: x.reshape((num_items,) + x.shape[2:]), data)
+        take = lambda x, idx: x[idx]  # noqa: E731
+        weight_of = lambda w, real: w & real  # noqa: E731
+    return data, take, weight_of
+
+
+def ppo_update(config: PPOConfig, network_for, optimizer, state: PolicyGradientState,
+               traj: Transition, key: jax.Array):
+    """``update_epochs`` passes over the rollout's complete decisions in minibatches."""
+    traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
+    memory = config.recurrent_size
+    num_envs = traj.reward.shape[1]
+    # Train on complete decisions; a pending one returns in the next rollout (smdp.py).
+    fields, episodes = decision_data(config, traj, state.hp)
+    data, take, weight_of = minibatch_source(traj, fields, memory)
+    loss_fn = functools.partial(ppo_loss, config, network_for)
+
+    def minibatch_step(carry, mb):
+        params, opt_state, grad_steps, stopped = carry
+        idx, real = mb
+        batch = jax.tree.map(lambda x: take(x, idx), data)
+        batch = batch[:-1] + (weight_of(batch[-1], real),)
+        (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, state.hp)
+        updates, new_opt_state = optimizer.update(grads, opt_state, params)
+        updates = scale_by_lr(updates, state.hp["learning_rate"])
+        new_params = optax.apply_updates(params, updates)
+        has_decision = jnp.any(batch[-1])
+        stopped = kl_stop(stopped, has_decision, aux["approx_kl"], state.hp)
+        step = has_decision & ~stopped
+        params, opt_state = apply_if(step, (new_params, new_opt_state), (params, opt_state))
+        aux = dict(aux, total_loss=total, counted=has_decision.astype(jnp.float32))
+        return (params, opt_state, grad_steps + step.astype(jnp.int32), stopped), aux
+
+    def epoch_step(carry, epoch_key):
+        # environments are dealt like ticks whose every one holds a decision
+        deal = jnp.ones((num_envs,), bool) if memory else data[-1]
+        idx, real = minibatch_indices(epoch_key, deal, config.num_minibatches)
+        return jax.lax.scan(minibatch_step, carry, (idx, real))
+
+    carry = (state.params, state.opt_state, state.grad_steps, jnp.zeros((), bool))
+    epoch_keys = jax.random.split(key, config.update_epochs)
+    (params, opt_state, grad_steps, stopped), aux = jax.lax.scan(epoch_step, carry, epoch_keys)
+    return finish(state, params, opt_state, grad_steps, stopped, aux, episodes, fields)

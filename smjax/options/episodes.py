@@ -65,8 +65,8 @@ def first_episodes(runner, key, learner_params, bank, learned, learner, start, t
     counts, so short episodes are not over-represented, and one still unfinished at
     ``max_ticks`` counts as a failure. An environment whose levels above never called the
     learner by ``max_ticks`` says nothing about it and is left out of the means
-    (``uncalled``: their share): counted as failures they held a deep level's gate below
-    its threshold however well the option did where it was called.
+    (``uncalled``: their share): counted as failures they would hold a deep level's gate
+    below its threshold however well the option did where it was called.
     ``skip``: start as finished (under ``vmap`` a skipped seed does not keep the loop
     running for the others; its result is meaningless).
 

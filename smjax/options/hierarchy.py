@@ -34,13 +34,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from smjax.options.hierarchy_checks import (
+    ALL_PRIMITIVES as ALL_PRIMITIVES, HierarchyError, check_declaration,
+    check_reachable_and_realisable, checked_policies, expand_children, option_order,
+)
 from smjax.options.template import OptionTemplate
-
-ALL_PRIMITIVES = "primitives"
-
-
-class HierarchyError(ValueError):
-    """A hierarchy declaration is malformed; the message names the culprit."""
 
 
 @dataclass(frozen=True)
@@ -55,7 +53,8 @@ class Hierarchy:
     success: Callable[[Any, Any], Any] | None = None
     #: The best task success an episode can reach (1.0: no lower bound is known). Craft's
     #: success is its return, and a task whose recipe leaves items over can never reach 1
-    #: (make_bench: 0.8); the trainer keeps a root threshold below it (TrainConfig.ceiling_fraction).
+    #: (make_bench: 0.8); the trainer keeps a root threshold below it
+    #: (TrainConfig.ceiling_fraction).
     success_ceiling: float = 1.0
     #: option name -> scripted policy ``policy(key, state, params, mask) -> int`` child
     #: index (pure and jittable; see the module docstring). None: no scripted policies.
@@ -65,142 +64,18 @@ class Hierarchy:
     depth_of: Mapping[str, int] = field(init=False)
 
     def __post_init__(self):
-        if not isinstance(self.task, str) or not self.task:
-            raise HierarchyError(f"hierarchy task must be a non-empty name, got {self.task!r}")
-        non_names = [k for k in self.children if not isinstance(k, str)]
-        if non_names:  # checked first: later messages sort and compare names
-            raise HierarchyError(f"option names must be strings, got {non_names!r}")
-        if self.task in self.templates:
-            raise HierarchyError(
-                f"task {self.task!r} is also a template name; the root option needs its own name"
-            )
-        if self.task in self.primitive_names or self.task == ALL_PRIMITIVES:
-            raise HierarchyError(f"task {self.task!r} is also a primitive action's name; the root "
-                                 f"option needs its own name")
-        if self.success is not None and not callable(self.success):
-            raise HierarchyError(
-                f"success must be a function success(state, params) -> float in [0, 1] or "
-                f"bool, got {type(self.success).__name__}"
-            )
-        ceiling = self.success_ceiling
-        if isinstance(ceiling, bool) or not isinstance(ceiling, (int, float)) \
-                or not 0 < ceiling <= 1:
-            raise HierarchyError(f"success_ceiling must be a number in (0, 1], got {ceiling!r}")
-        if self.task not in self.children:
-            raise HierarchyError(
-                f"hierarchy for task {self.task!r} declares no children for the task itself; "
-                f"declared: {sorted(self.children)}"
-            )
-        for name, tpl in self.templates.items():
-            if tpl.name != name:
-                raise HierarchyError(f"template registered as {name!r} is named {tpl.name!r}")
-        expanded = {p: tuple(self._expand(p, kids)) for p, kids in self.children.items()}
+        check_declaration(self.task, self.children, self.templates, self.primitive_names,
+                          self.success, self.success_ceiling)
+        expanded = {p: tuple(expand_children(p, kids, self.task, self.templates,
+                                             self.primitive_names))
+                    for p, kids in self.children.items()}
         object.__setattr__(self, "children", expanded)
-        object.__setattr__(self, "policies", self._check_policies(self.policies))
-        order, depth = self._walk()
+        object.__setattr__(self, "policies", checked_policies(self.policies, expanded))
+        order, depth = option_order(self.task, expanded, self.templates)
         object.__setattr__(self, "option_names", tuple(order))
         object.__setattr__(self, "depth_of", depth)
-        orphans = [name for name in self.children if name not in depth]
-        if orphans:  # its children would never be chosen: a mistake in the declaration
-            raise HierarchyError(f"option(s) {sorted(orphans)} have children declared but are "
-                                 f"never reachable from the task {self.task!r}; list them as a "
-                                 f"child of an option that is, or drop them")
-        for name in order[1:]:
-            tpl = self.templates[name]
-            if name in self.policies:  # it decides by its script: nothing else is needed
-                continue
-            if not tpl.realisable and not self.children.get(name):
-                raise HierarchyError(
-                    f"template {name!r} has no way to be realised: no teleport, no controller "
-                    f"and no children to learn a policy over"
-                )
-            if not tpl.realisable:
-                raise HierarchyError(
-                    f"template {name!r} has neither a teleport nor a controller, so its callers "
-                    f"cannot run it before it is learned"
-                )
-
-    # ---- construction helpers ------------------------------------------
-    def _check_policies(self, policies) -> dict:
-        if policies is None:
-            return {}
-        if not isinstance(policies, Mapping):
-            raise HierarchyError(f"policies must map option names to scripted policies, got "
-                                 f"{type(policies).__name__}")
-        for name, fn in policies.items():
-            if not isinstance(name, str) or name not in self.children:
-                raise HierarchyError(
-                    f"scripted policy for {name!r}, which is not an option with children; "
-                    f"options with children: {sorted(self.children)}")
-            if not callable(fn):
-                raise HierarchyError(
-                    f"scripted policy of {name!r} must be a function policy(key, state, "
-                    f"params, mask) -> child index, got {type(fn).__name__}")
-        return dict(policies)
-
-    def _expand(self, parent: str, kids: Sequence[str]) -> list[str]:
-        if isinstance(kids, str) or not isinstance(kids, Sequence):
-            raise HierarchyError(
-                f"children of {parent!r} must be a list of names, got {type(kids).__name__}"
-            )
-        if parent != self.task and parent not in self.templates:
-            raise HierarchyError(
-                f"children declared for unknown option {parent!r}; known templates: "
-                f"{sorted(self.templates)}"
-            )
-        out: list[str] = []
-        for kid in kids:
-            if not isinstance(kid, str):
-                raise HierarchyError(f"{parent!r} lists a child that is not a name: {kid!r}")
-            if kid == ALL_PRIMITIVES:
-                if not self.primitive_names:
-                    raise HierarchyError(
-                        f"{parent!r} asks for primitive actions, but this environment has no "
-                        f"discrete primitive actions"
-                    )
-                out.extend(p for p in self.primitive_names if p not in out)
-            elif kid in self.primitive_names or kid in self.templates:
-                if kid not in out:
-                    out.append(kid)
-            else:
-                raise HierarchyError(
-                    f"{parent!r} lists unknown child {kid!r}; valid: templates "
-                    f"{sorted(self.templates)}, primitives {list(self.primitive_names)} "
-                    f"or {ALL_PRIMITIVES!r}"
-                )
-        if not out:
-            raise HierarchyError(f"option {parent!r} has an empty list of children")
-        return out
-
-    def _walk(self) -> tuple[list[str], dict[str, int]]:
-        # Cycle check by depth-first search, then breadth-first order for levels.
-        state: dict[str, int] = {}
-
-        def visit(name: str, path: list[str]) -> None:
-            state[name] = 1
-            for kid in self.children.get(name, ()):
-                if kid not in self.templates:
-                    continue
-                if state.get(kid) == 1:
-                    cycle = path[path.index(kid):] + [kid] if kid in path else [name, kid]
-                    raise HierarchyError(f"hierarchy has a cycle: {' -> '.join(cycle)}")
-                if state.get(kid) is None:
-                    visit(kid, path + [kid])
-            state[name] = 2
-
-        visit(self.task, [self.task])
-        order, depth = [self.task], {self.task: 0}
-        frontier = [self.task]
-        while frontier:
-            nxt = []
-            for name in frontier:
-                for kid in self.children.get(name, ()):
-                    if kid in self.templates and kid not in depth:
-                        depth[kid] = depth[name] + 1
-                        order.append(kid)
-                        nxt.append(kid)
-            frontier = nxt
-        return order, depth
+        check_reachable_and_realisable(self.task, order, depth, expanded, self.templates,
+                                       self.policies)
 
     # ---- views used by trainers -----------------------------------------
     @property

@@ -66,8 +66,9 @@ def decide(stack: ExecutionStack, frozen_choice: jax.Array, learner_choice: jax.
     primitives first, then templates); ``learner_choice``: the learner's pick.
     ``learned``: the options that choose (``deciding_options``: learned, or with a
     scripted policy). A learned option or the learner chooses; an unlearned option on the
-    stack plays its script (the walk stops there). A chosen template is pushed (``pushable & callable_``; the walk goes on
-    one level deeper) or else teleported (the walk stops). The stack is at most its
+    stack plays its script (the walk stops there). A chosen template is pushed
+    (``pushable & callable_``; the walk goes on one level deeper) or else teleported (the
+    walk stops). The stack is at most its
     capacity deep, so that many steps always reach a decision.
     """
     num_options = learned.shape[0]

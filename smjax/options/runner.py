@@ -5,9 +5,8 @@ down until a primitive action is fixed: the learner (the option being trained) s
 from its own policy, learned options use their frozen policy from the *policy bank*, an
 option with a scripted policy (``Hierarchy.policies``) that is neither learned nor the
 learner decides by its script, an unlearned template on the stack plays its scripted
-controller, and calling an
-unlearned template that has a teleport jumps the state (the jump and its primitive
-action are that tick's single environment step). After the step, every stack entry
+controller, and calling an unlearned template that has a teleport jumps the state (the
+jump and its primitive action are that tick's single environment step). After the step, every stack entry
 whose template is satisfied or out of ticks is popped (with everything above it).
 
 Only the learner's own choices become training transitions (``decision``); its reward
@@ -133,7 +132,7 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
     def deciding(self, learned: jax.Array, teleport_on: jax.Array | bool) -> jax.Array:
         """bool [num_options]: options that choose when on the stack (besides the learner):
         the learned ones, and those with a scripted policy (``phases.deciding_options``)."""
-        if not self.policies:  # as before scripted policies existed: the same program
+        if not self.policies:  # no scripted policy: the learned options alone, no extra ops
             return learned
         return phases.deciding_options(learned, jnp.asarray(self.has_policy),
                                        jnp.asarray(self.has_teleport), teleport_on)
@@ -291,7 +290,8 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
         """``frozen`` [B, O] with each scripted policy's pick where its option is not learned."""
         if not self.policies:
             return frozen
-        # its own key stream, so that hierarchies without scripted policies keep theirs
+        # a key stream of its own: the other picks draw the same keys with or without
+        # scripted policies
         keys = jax.random.split(jax.random.fold_in(k_frozen, 0x5C41), frozen.shape[0])
         picks = jax.vmap(self._scripted_picks)(keys, carry.env_state, masks)  # [B, n]
         for j, (option, _, _) in enumerate(self.policies):

@@ -23,7 +23,7 @@ class EpisodeStarts:
     """The runner's episode-start methods (see the module docstring)."""
 
     def reset(self, key: jax.Array, controls: Controls, num_envs: int) -> EnvCarry:
-        # without a pool the key is used as it always was, so such runs keep their numbers
+        # split only for a pool: without one the starts are drawn from ``key`` itself
         k_envs, k_pool = jax.random.split(key) if self.reset_pool else (key, None)
         obs, state = self._fresh_starts(k_envs, num_envs)
         stack = jax.vmap(lambda _: stack_init(self.D, controls.start))(jnp.arange(num_envs))

@@ -36,9 +36,10 @@ def side_costs(templates, env_params, before, after, on, weight):
 
     Undiscounted on purpose: a cost is charged when it is incurred (a unit picked up) and
     given back when it goes (a unit consumed), so what an option already holds when it is
-    called costs nothing while it waits. The discounted form ``c(s) - gamma * c(s')`` paid
-    ``(1 - gamma) * c`` every tick for holding c: over a run, up to c in all, so an option
-    called while holding weight x 0.1 x (items) >= 1 earned more by never finishing."""
+    called costs nothing while it waits. The discounted form ``c(s) - gamma * c(s')`` would
+    pay ``(1 - gamma) * c`` every tick for holding c: over a run, up to c in all, so an
+    option called while holding weight x 0.1 x (items) >= 1 would earn more by never
+    finishing."""
     if weight is None or not any(t.side_cost is not None for t in templates):
         return 0.0
     cost = jax.vmap(lambda s: per_option(templates, env_params, s, "side_cost", 0.0, jnp.float32))

@@ -122,48 +122,17 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
     fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.4), squeeze=False)
     labels = run_labels([d for d, _, _ in runs], [meta for _, _, meta in runs])
     for (d, rows, meta), label in zip(runs, labels):
-        by_level = defaultdict(lambda: defaultdict(list))
-        for r in rows:
-            if r["running_success"] == "":
-                continue
-            by_level[(int(r["level"]), r["template"])][int(r["seed"])].append(
-                (int(r["episodes"]), float(r["running_success"])))
+        by_level = success_points(rows)
         for ax, key in zip(axes[0], levels):
             seeds = by_level.get(key)
             if not seeds:
                 continue
-            grid_max = max(pts[-1][0] for pts in seeds.values())
-            grid = np.linspace(0, grid_max, 100)
-            ys = []
-            for pts in seeds.values():
-                x, y = np.array(pts).T
-                ys.append(np.interp(grid, x, y, left=np.nan, right=y[-1]))
-            ys = np.array(ys)
-            with warnings.catch_warnings():  # columns before any seed's first point are all-NaN
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean, std = np.nanmean(ys, 0), np.nanstd(ys, 0)
+            grid, mean, std = mean_over_seeds(seeds)
             line, = ax.plot(grid, mean, label=label)
             ax.fill_between(grid, mean - std, mean + std, alpha=0.2, color=line.get_color())
             if key[1] == FINETUNE:
                 _before_after(ax, meta, line.get_color())
-    for ax, (level, template) in zip(axes[0], levels):
-        finetune = template == FINETUNE
-        ax.set_title("fine-tuning, no teleports" if finetune else f"level {level}: {template}")
-        ax.set_xlabel("episodes")
-        ax.set_ylabel("task success" if finetune else "running success")
-        ax.grid(alpha=0.3)
-        if not ax.lines:
-            ax.text(0.5, 0.5, "no complete success window yet", ha="center", va="center",
-                    transform=ax.transAxes, fontsize=8, color="gray")
-    # a legend on the first panel that has curves (a level can have none, e.g. a run cut
-    # before its first full success window)
-    for ax in axes[0]:
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
-            break
-    for ax, (_, template) in zip(axes[0], levels):  # fine-tuning's before/after lines
-        if template == FINETUNE and ax.get_legend() is None and ax.lines:
-            ax.legend(fontsize=7)
+    _label_panels(axes[0], levels)
     if title:
         fig.suptitle(title)
     fig.tight_layout()
@@ -174,6 +143,57 @@ def plot_curves(run_dirs, out_path, title: str | None = None) -> Path:
     fig.savefig(out_path, dpi=110)
     plt.close(fig)
     return out_path
+
+
+def success_points(rows: list[dict]) -> dict:
+    """(level, template) -> seed -> [(episodes, running success)] of a run's curve rows
+    (rows without a complete success window left out)."""
+    by_level = defaultdict(lambda: defaultdict(list))
+    for r in rows:
+        if r["running_success"] == "":
+            continue
+        by_level[(int(r["level"]), r["template"])][int(r["seed"])].append(
+            (int(r["episodes"]), float(r["running_success"])))
+    return by_level
+
+
+def mean_over_seeds(seeds: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(episodes grid, mean, std) of the seeds' curves, each interpolated on a common grid
+    of 100 points up to the longest (NaN before a seed's first point, its last value after
+    its end)."""
+    grid_max = max(pts[-1][0] for pts in seeds.values())
+    grid = np.linspace(0, grid_max, 100)
+    ys = []
+    for pts in seeds.values():
+        x, y = np.array(pts).T
+        ys.append(np.interp(grid, x, y, left=np.nan, right=y[-1]))
+    ys = np.array(ys)
+    with warnings.catch_warnings():  # columns before any seed's first point are all-NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean, std = np.nanmean(ys, 0), np.nanstd(ys, 0)
+    return grid, mean, std
+
+
+def _label_panels(axes, levels) -> None:
+    """Titles, axis labels and legends of the panels, one per (level, template)."""
+    for ax, (level, template) in zip(axes, levels):
+        finetune = template == FINETUNE
+        ax.set_title("fine-tuning, no teleports" if finetune else f"level {level}: {template}")
+        ax.set_xlabel("episodes")
+        ax.set_ylabel("task success" if finetune else "running success")
+        ax.grid(alpha=0.3)
+        if not ax.lines:
+            ax.text(0.5, 0.5, "no complete success window yet", ha="center", va="center",
+                    transform=ax.transAxes, fontsize=8, color="gray")
+    # a legend on the first panel that has curves (a level can have none, e.g. a run cut
+    # before its first full success window)
+    for ax in axes:
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+            break
+    for ax, (_, template) in zip(axes, levels):  # fine-tuning's before/after lines
+        if template == FINETUNE and ax.get_legend() is None and ax.lines:
+            ax.legend(fontsize=7)
 
 
 def plot_run(run_dir) -> Path:

@@ -3,14 +3,9 @@
 ``oracle_action(state, params, goal_item)`` is a pure, stateless function of one
 (unbatched) state: jit- and vmap-able. It decides in two stages.
 
-1. **What next** (``target_code``): a kind id to go and USE, read off the recipe tree and
-   the inventory. For a primitive: that primitive. For a crafted item: the first of its
-   direct ingredients (in a planned order) held in fewer than the planned count is
-   obtained first (recursively), and once all are held its workshop is the target. For a
-   treasure (gold, gem): the treasure itself once some 4-neighbour of it is open; else,
-   with its tool held (bridge, axe), a barrier cell (water, stone) 4-adjacent to the
-   treasure; else the tool, recursively.
-2. **How to get there** (``navigate``): a cost-to-go field over the 12 x 12 grid by
+1. **What next** (``target_code``): a kind id to go and USE, by the recipe plan's rule
+   (``recipe_plan.next_target``) on the inventory and on which treasures lie open.
+2. **How to get there** (``cost_to_go``): a cost-to-go field over the 12 x 12 grid by
    iterated min-plus relaxation (Bellman-Ford with a 4-neighbour stencil, run until it
    stops changing), from the *stand cells* (cells 4-adjacent to a target cell). Empty cells
    cost 1; a primitive in the way can be grabbed and walked through at a cost of
@@ -23,17 +18,14 @@
    otherwise steps to the neighbour of least cost-to-go, turning to it and USEing first
    where that neighbour must be cleared.
 
-The ingredient order and counts of every crafted item are planned once at import by
-simulating the same decision rule on the inventory alone (``plan``): one USE at a workshop
-fires every recipe of it whose inputs are held, in file order, so e.g. a stick made while
-iron is held becomes shears, and a hammer needs two wood (the plank recipe fires first).
-
 ``oracle_decide`` also reports whether the oracle is stuck (its target is unreachable
 even through clearable cells, or absent from the map); stuck, it returns DOWN.
+
+The plan's results (``ORDERS``, ``COUNTS``, ``ingredient_counts``, ``solvable_items``,
+``best_return``) are importable from here too.
 """
 from __future__ import annotations
 
-import itertools
 from typing import Callable
 
 import jax
@@ -41,6 +33,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.envs.craft import constants as C
+from smjax.envs.craft.recipe_plan import (
+    COUNTS, ORDERS, next_target,
+    best_return as best_return, ingredient_counts as ingredient_counts,
+    solvable_items as solvable_items,
+)
 from smjax.envs.craft.types import CraftParams, CraftState
 
 N = C.GRID_SIZE
@@ -51,169 +48,10 @@ MINE_COST = 2  # of mining a stone in the way while an axe is held (USE, then st
 # another must be made before the treasure's own water can go (a second trip)
 BRIDGE_COST = 200
 PRIM_LO, PRIM_HI = C.PRIMITIVE_IDS[0], C.PRIMITIVE_IDS[-1]
-TREASURE_OF_BARRIER = {C.WATER: C.GOLD, C.STONE: C.GEM}
-BARRIER_OF_TREASURE = {C.GOLD: C.WATER, C.GEM: C.STONE}
-TOOL_OF_TREASURE = {C.KIND_ID[t]: C.KIND_ID[tool] for t, tool in C.TREASURE_TOOL.items()}
-_RECIPE_OF = {out: (ins, ws) for out, ins, ws in C.RECIPE_IDS}
-_FILE_POS = {out: i for i, (out, _, _) in enumerate(C.RECIPE_IDS)}
 
 
 # --------------------------------------------------------------------------------------
-# The recipe tree: ingredient counts and order, planned on the inventory alone (numpy)
-
-
-def _fire_np(inv: np.ndarray, workshop: int) -> np.ndarray:
-    """``dynamics.fire_recipes`` on a numpy inventory (one USE at ``workshop``)."""
-    inv = inv.copy()
-    for out, ins, at in C.RECIPE_IDS:
-        if at == workshop and all(inv[i] > 0 for i in ins):
-            for i in ins:
-                inv[i] -= 1
-            inv[out] += 1
-    return inv
-
-
-def _counts(item: int) -> dict[int, int]:
-    """How many of each direct ingredient to hold before USE at the workshop, so that the
-    USE yields ``item`` (earlier recipes of the same workshop may eat an input first)."""
-    ins, ws = _RECIPE_OF[item]
-    req = {i: 1 for i in ins}
-    for _ in range(8):
-        inv = np.zeros(C.NUM_KINDS, np.int64)
-        for i, n in req.items():
-            inv[i] = n
-        if _fire_np(inv, ws)[item] > 0:
-            return req
-        # replay the workshop's recipes in order; top up what was gone when ours came
-        for out, rins, at in C.RECIPE_IDS:
-            if at != ws:
-                continue
-            if out == item:
-                for i in ins:
-                    if inv[i] == 0:
-                        req[i] += 1
-                break
-            if all(inv[i] > 0 for i in rins):
-                for i in rins:
-                    inv[i] -= 1
-                inv[out] += 1
-    return req
-
-
-def _target_generic(item: int, inv, exposed, where, orders, counts):
-    """The next kind to USE toward one more ``item`` (shared by numpy and JAX paths).
-
-    ``exposed(treasure)`` says whether a treasure has an open 4-neighbour; ``where`` is a
-    select (``jnp.where`` or a Python one); a barrier kind (water, stone) as the target means
-    "the barrier cells 4-adjacent to its treasure".
-    """
-    if item in TOOL_OF_TREASURE:
-        tool = TOOL_OF_TREASURE[item]
-        via_tool = where(inv[tool] > 0, BARRIER_OF_TREASURE[item],
-                         _target_generic(tool, inv, exposed, where, orders, counts))
-        return where(exposed(item), item, via_tool)
-    if item not in _RECIPE_OF:
-        return item
-    _, ws = _RECIPE_OF[item]
-    code = ws
-    for i in reversed(orders[item]):
-        code = where(inv[i] >= counts[item][i], code,
-                     _target_generic(i, inv, exposed, where, orders, counts))
-    return code
-
-
-def _py_where(c, a, b):
-    return a if c else b
-
-
-def _simulate(goal: int, orders, counts, max_uses: int = 60):
-    """Run the decision rule on the inventory alone from nothing; (uses, inventory) or None.
-
-    None: the goal was never held within ``max_uses`` USEs, or the plan grabbed more than
-    the map's 4 of some resource."""
-    inv = np.zeros(C.NUM_KINDS, np.int64)
-    open_ = {C.GOLD: False, C.GEM: False}
-    grabbed = np.zeros(C.NUM_KINDS, np.int64)
-    for uses in range(max_uses):
-        if inv[goal] > 0:
-            return uses, inv
-        code = int(_target_generic(goal, inv, lambda t: open_[t], _py_where, orders, counts))
-        if code in C.WORKSHOPS:
-            inv = _fire_np(inv, code)
-        elif code in TREASURE_OF_BARRIER:
-            open_[TREASURE_OF_BARRIER[code]] = True
-            if code == C.WATER:
-                inv[C.BRIDGE] -= 1
-        else:
-            inv[code] += 1
-            grabbed[code] += 1
-            if code not in (C.GOLD, C.GEM) and grabbed[code] > 4:
-                return None
-    return None
-
-
-def plan() -> tuple[dict[int, tuple[int, ...]], dict[int, dict[int, int]]]:
-    """Per crafted item: the order to obtain its ingredients in, and how many of each.
-
-    Items are planned leaves first; each tries every order of its direct ingredients and
-    keeps the one whose simulated run succeeds in the fewest USEs, then with the fewest
-    other items left over (each costs 0.1 reward). With none succeeding it keeps file order.
-    """
-    counts = {out: _counts(out) for out in _RECIPE_OF}
-    orders: dict[int, tuple[int, ...]] = {}
-    for out, ins, _ in C.RECIPE_IDS:  # inputs always come earlier in file order
-        best, best_key = tuple(ins), None
-        for perm in itertools.permutations(ins):
-            trial = dict(orders)
-            trial[out] = perm
-            for o, i2, _ in C.RECIPE_IDS:  # later items: file order for now
-                trial.setdefault(o, tuple(i2))
-            res = _simulate(out, trial, counts)
-            if res is None:
-                continue
-            uses, inv = res
-            key = (uses, int(inv.sum() - inv[out]))
-            if best_key is None or key < best_key:
-                best, best_key = perm, key
-        orders[out] = best
-    return orders, counts
-
-
-ORDERS, COUNTS = plan()
-
-
-def _plan_outcome(name: str) -> tuple[int, int] | None:
-    """(USEs, other items left held) of the plan for item ``name`` from nothing, or None."""
-    goal = C.KIND_ID[name]
-    res = _simulate(goal, ORDERS, COUNTS)
-    return None if res is None else (res[0], int(res[1].sum() - res[1][goal]))
-
-
-def ingredient_counts(item: str) -> dict[str, int]:
-    """Units of each direct ingredient to hold at the workshop so that one USE yields
-    ``item`` (in recipe order; a flag needs 2 sticks and 2 iron, as the axe recipe fires
-    first and eats one of each); a treasure: its tool, 1; a primitive: none."""
-    kind = C.KIND_ID[item]
-    if kind in COUNTS:
-        return {C.KIND_NAMES[i]: n for i, n in COUNTS[kind].items()}
-    return {i: 1 for i in C.ingredients(item)}
-
-
-def solvable_items() -> dict[str, tuple[int, int] | None]:
-    """item -> (USEs, other items left held) of the plan from nothing, or None if it fails."""
-    return {name: _plan_outcome(name) for name in C.ITEMS}
-
-
-def best_return(task: str) -> float:
-    """The best return (Craft's task success) of ``task``: 1 less 0.1 per item the plan
-    leaves held beside the goal (make_bench: 0.8; multi-fire USE makes some leftovers
-    unavoidable), or 1.0 where the plan fails (no lower bound known)."""
-    res = _plan_outcome(C.TASKS[task])
-    return 1.0 if res is None else round(max(0.0, 1.0 - 0.1 * res[1]), 6)
-
-
-# --------------------------------------------------------------------------------------
-# JAX: target, navigation, decision
+# What next, how to get there, the action
 
 
 def _shift(a: jax.Array, dx: int, dy: int, fill) -> jax.Array:
@@ -247,7 +85,7 @@ def target_code(state: CraftState, item) -> jax.Array:
     def exposed(treasure: int) -> jax.Array:
         return jnp.any((grid == treasure) & _any_neighbour(open_cell))
 
-    code = _target_generic(_item_id(item), inv, exposed, jnp.where, ORDERS, COUNTS)
+    code = next_target(_item_id(item), inv, exposed, jnp.where, ORDERS, COUNTS)
     return jnp.asarray(code, jnp.int32)
 
 
@@ -337,10 +175,10 @@ def oracle_action(state: CraftState, params: CraftParams | None = None, goal_ite
         return oracle_decide(state, goal_item)[0]
     if params is None:
         raise ValueError("oracle_action needs goal_item or params (whose goal it reads)")
-    return _decide_traced(state, params.goal)[0]
+    return oracle_decide_traced(state, params.goal)[0]
 
 
-def _decide_traced(state: CraftState, item_id: jax.Array, count: jax.Array | int = 1):
+def oracle_decide_traced(state: CraftState, item_id: jax.Array, count: jax.Array | int = 1):
     """``oracle_decide`` for a traced item kind id (one field, target selected by id),
     done once ``count`` of it are held."""
     codes = jnp.stack([target_code(state, C.KIND_ID[name]) for name in C.ITEMS])
@@ -358,7 +196,7 @@ def _decide_traced(state: CraftState, item_id: jax.Array, count: jax.Array | int
 
 
 def _give_fn(key: jax.Array, state: CraftState, params: CraftParams, data: dict) -> jax.Array:
-    return _decide_traced(state, data["item_id"], data["count"])[0]
+    return oracle_decide_traced(state, data["item_id"], data["count"])[0]
 
 
 def give_controller(item: str, count: int = 1) -> Callable:

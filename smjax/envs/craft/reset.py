@@ -74,7 +74,7 @@ def _uniform_int(u: jax.Array, n: jax.Array) -> jax.Array:
 
 def _div_small(a: jax.Array, b: jax.Array) -> jax.Array:
     """a // b for 0 <= a < 2**20, 1 <= b: a float divide (vectorises; integer division on
-    CPU does not and was the most expensive op of world generation)."""
+    CPU does not, and would be the most expensive op of world generation)."""
     q = ((a.astype(jnp.float32) + 0.5) / b.astype(jnp.float32)).astype(jnp.int32)
     return q
 

@@ -11,15 +11,15 @@ A stand cell next to two targets is two pairs, as in the reference's list of can
 Two additions of smjax's (docs/environments.md, Craft templates):
 
 * ``give_X_xN`` promises "N of X are held" (initiable while fewer are). Multi-fire USE
-  makes some recipes need two units of an ingredient (``oracle.ingredient_counts``: a flag
-  needs 2 sticks and 2 iron, since the axe recipe fires first and eats one of each), and
-  ``give_X``, not initiable once one X is held, cannot fetch the second. Its teleport adds
-  the missing units (all but the one its USE picks up, for a primitive).
+  makes some recipes need two units of an ingredient (``recipe_plan.ingredient_counts``:
+  a flag needs 2 sticks and 2 iron, since the axe recipe fires first and eats one of
+  each), and ``give_X``, not initiable once one X is held, cannot fetch the second. Its
+  teleport adds the missing units (all but the one its USE picks up, for a primitive).
 * A treasure behind its barrier (gold in water, a gem in stone): the barrier cells next to
   it are stand cells too, and the teleport clears the one it stands in, which is where
   the learned ``give_gold`` ends (it crosses the water with a bridge). By the reference's
-  rule the teleport does nothing until the water is crossed, so a task with gold as an
-  ingredient (make_goldarrow) left its root no way to get the gold.
+  rule the teleport would do nothing until the water is crossed, which would leave a
+  task with gold as an ingredient (make_goldarrow) no way for its root to get the gold.
 """
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ import numpy as np
 
 from smjax.core.sampling import choose_uniform
 from smjax.envs.craft import constants as C
-from smjax.envs.craft.oracle import BARRIER_OF_TREASURE, best_return, ingredient_counts
+from smjax.envs.craft.recipe_plan import BARRIER_OF_TREASURE, best_return, ingredient_counts
 from smjax.envs.craft.types import CraftParams, CraftState
 from smjax.options import Hierarchy, OptionTemplate, Parametric, declare
 

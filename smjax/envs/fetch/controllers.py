@@ -25,8 +25,8 @@ steps. Its phase is derived from the state instead (the finger servo target
 * *opening* (replaces "open for 5 steps"): release keeps the arm still until the
   finger gap is nearly fully open, then lifts.
 
-Geometry-aware touches that the reference controllers lack, each added because a
-measured failure needed it: the reach opens the fingers only to a 7.6 cm gap, grasps a
+Geometry-aware touches that the reference controllers lack, each because a grasp fails
+without it: the reach opens the fingers only to a 7.6 cm gap, grasps a
 block off-centre along x when a neighbour lies in the fingers' path
 (``grasp_offset``), and rises above any block it is still straddling before moving
 sideways (otherwise the block just released on the tower is dragged off).

@@ -91,43 +91,67 @@ def check_num_blocks(num_blocks: int) -> int:
     return int(num_blocks)
 
 
-def scene_xml(num_blocks: int, physics: PhysicsConfig = PhysicsConfig()) -> str:
-    """MJCF text of the scene with ``num_blocks`` blocks."""
-    n = check_num_blocks(num_blocks)
-    gx, gy, gz = GRIPPER_START
-    fx, fy, fz = FINGER_HALF
-    blocks, goals, pairs = [], [], []
+def block_xml(i: int) -> str:
+    """Block ``i``'s body: a free box (its pose a placeholder: reset samples it)."""
+    return (
+        f'<body name="block{i}" pos="{1.2 + 0.06 * i} 0.6 {BLOCK_REST_Z}">'
+        f'<freejoint name="block{i}"/>'
+        f'<geom name="block{i}" type="box" size="{BLOCK_HALF} {BLOCK_HALF} {BLOCK_HALF}" '
+        f'mass="{BLOCK_MASS}" rgba="{BLOCK_COLORS[i]}"/></body>'
+    )
+
+
+def goal_xml(i: int) -> str:
+    """Block ``i``'s goal marker: a translucent site in the block's colour."""
+    rgba = BLOCK_COLORS[i].rsplit(" ", 1)[0] + " 0.35"
+    return f'<site name="goal{i}" pos="1.3 0.75 {0.43 + 0.05 * i}" size="0.02" rgba="{rgba}"/>'
+
+
+def contact_pairs_xml(n: int) -> list[str]:
+    """The only contacts tested: each block with the table top, every earlier block and
+    both fingers."""
+    pairs = []
     for i in range(n):
-        # Initial block poses are placeholders; reset samples them.
-        blocks.append(
-            f'<body name="block{i}" pos="{1.2 + 0.06 * i} 0.6 {BLOCK_REST_Z}">'
-            f'<freejoint name="block{i}"/>'
-            f'<geom name="block{i}" type="box" size="{BLOCK_HALF} {BLOCK_HALF} {BLOCK_HALF}" '
-            f'mass="{BLOCK_MASS}" rgba="{BLOCK_COLORS[i]}"/></body>'
-        )
-        rgba = BLOCK_COLORS[i].rsplit(" ", 1)[0] + " 0.35"
-        goals.append(f'<site name="goal{i}" pos="1.3 0.75 {0.43 + 0.05 * i}" '
-                     f'size="0.02" rgba="{rgba}"/>')
         pairs.append(f'<pair geom1="table_top" geom2="block{i}" {STIFF_CONTACT}/>')
         for j in range(i):
             pairs.append(f'<pair geom1="block{j}" geom2="block{i}" {STIFF_CONTACT}/>')
         for finger in ("finger_l", "finger_r"):
             pairs.append(f'<pair geom1="{finger}" geom2="block{i}" {GRIP_CONTACT}/>')
-    finger_bodies = []
-    for side, sign in (("l", 1), ("r", -1)):
-        finger_bodies.append(
-            f'<body name="finger_{side}" pos="0 {sign * fy} {FINGER_Z}" gravcomp="1">'
-            f'<joint name="finger_{side}" type="slide" axis="0 {sign} 0" '
-            f'range="{FINGER_RANGE[0]} {FINGER_RANGE[1]}" armature="{FINGER_ARMATURE}"/>'
-            f'<geom name="finger_{side}" type="box" size="{fx} {fy} {fz}" mass="0.1" '
-            f'rgba="0.3 0.3 0.3 1"/></body>'
-        )
-    actuators = "".join(
+    return pairs
+
+
+def finger_bodies_xml() -> list[str]:
+    """The two fingers: boxes on slide joints, mirrored about the grip point."""
+    fx, fy, fz = FINGER_HALF
+    return [
+        f'<body name="finger_{side}" pos="0 {sign * fy} {FINGER_Z}" gravcomp="1">'
+        f'<joint name="finger_{side}" type="slide" axis="0 {sign} 0" '
+        f'range="{FINGER_RANGE[0]} {FINGER_RANGE[1]}" armature="{FINGER_ARMATURE}"/>'
+        f'<geom name="finger_{side}" type="box" size="{fx} {fy} {fz}" mass="0.1" '
+        f'rgba="0.3 0.3 0.3 1"/></body>'
+        for side, sign in (("l", 1), ("r", -1))
+    ]
+
+
+def finger_actuators_xml() -> str:
+    """The fingers' force-limited position servos."""
+    return "".join(
         f'<position name="finger_{s}" joint="finger_{s}" kp="{FINGER_KP}" kv="{FINGER_KV}" '
         f'ctrlrange="{FINGER_RANGE[0]} {FINGER_RANGE[1]}" forcelimited="true" '
         f'forcerange="-{FINGER_FORCE} {FINGER_FORCE}"/>'
         for s in ("l", "r")
     )
+
+
+def scene_xml(num_blocks: int, physics: PhysicsConfig = PhysicsConfig()) -> str:
+    """MJCF text of the scene with ``num_blocks`` blocks."""
+    n = check_num_blocks(num_blocks)
+    gx, gy, gz = GRIPPER_START
+    blocks = [block_xml(i) for i in range(n)]
+    goals = [goal_xml(i) for i in range(n)]
+    pairs = contact_pairs_xml(n)
+    finger_bodies = finger_bodies_xml()
+    actuators = finger_actuators_xml()
     return f"""
 <mujoco model="fetch_stack{n}">
   <option timestep="{physics.timestep}" integrator="implicitfast" solver="Newton"

@@ -19,9 +19,9 @@ hold           never (one tick, like noop)                             1     eve
 
 ``hold`` is the root's "do nothing" of the ``paper_hold`` hierarchy. A root that may do
 nothing for one tick in any state has a near-free way to procrastinate: with a per-tick
-gamma of 0.96 one tick of delay costs about 4 % of |Q|, within DQN's noise, and a learning
-root filled its buffer with ~56 noop decisions per episode and idled (CPU, 41k env steps:
-greedy score 0.32). Holding is only useful once the tower stands (keep it, gripper clear).
+gamma of 0.96 one tick of delay costs about 4 % of |Q|, within DQN's noise, so a learning
+DQN root fills its buffer with noop decisions (dozens per episode) and idles. Holding is
+only useful once the tower stands (keep it, gripper clear).
 """
 from __future__ import annotations
 

@@ -175,8 +175,7 @@ def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tu
     d = jnp.clip(jnp.asarray(difficulty, jnp.float32), 0.0, 1.0)
     team = view.team
     sign = team_sign(team)
-    own, facing, u = view.own, view.facing, view.uniform
-    cur_dir, cur_sprint, cur_dribble, prev = view.cur_dir, view.cur_sprint, view.cur_dribble, view.prev
+    u = view.uniform
 
     ball = state.ball_pos[:2] * sign
     ball_vel = state.ball_vel[:2] * sign
@@ -188,13 +187,41 @@ def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tu
     is_carrier = jnp.arange(C.NUM_PLAYERS) == carrier
     receiver = jnp.where(player_team(state.pass_receiver) == team,
                          state.pass_receiver - C.NUM_PLAYERS * team, -1)
+    ball_ahead = loose_ball_target(state, ball, ball_vel)
+    move_dir, want_sprint, slide = off_ball_moves(
+        view, d, ball, ball_ahead, (we_have, they_have, loose), receiver)
 
-    # Where a loose ball will be: its landing point if in the air, a little ahead if rolling.
+    carrier_dir, carrier_sprint, carrier_kick, pressed = plan
+    desired_dir = jnp.where(is_carrier, carrier_dir, move_dir)
+    want_sprint = jnp.where(is_carrier, carrier_sprint, want_sprint)
+    want_dribble = is_carrier & pressed
+    kick = jnp.where(is_carrier, carrier_kick, jnp.where(slide, C.SLIDING, 0))
+
+    # Low difficulty: now and then run a random way instead.
+    wander = u[:, 3] < 0.15 * (1.0 - d)
+    desired_dir = jnp.where(wander & ~is_carrier, 1 + jnp.floor(u[:, 4] * 8).astype(jnp.int32), desired_dir)
+
+    action = sticky_action(view, kick, desired_dir, want_sprint, want_dribble)
+    react = u[:, 2] < 0.15 + 0.85 * d
+    action = jnp.where(react, action, view.prev).astype(jnp.int32)
+    return jnp.where(team == 1, mirror_action(action), action)
+
+
+def loose_ball_target(state: FootballState, ball: jax.Array, ball_vel: jax.Array) -> jax.Array:
+    """Where a loose ball will be (team frame): its landing point if in the air, a little
+    ahead if rolling."""
     vz, z = state.ball_vel[2], state.ball_pos[2]
     t_land = (vz + jnp.sqrt(vz * vz + 2.0 * C.GRAVITY * z)) / C.GRAVITY
-    ball_ahead = ball + ball_vel * jnp.clip(jnp.where(z > 0.0, t_land, 4.0), 0.0, 20.0)
+    return ball + ball_vel * jnp.clip(jnp.where(z > 0.0, t_land, 4.0), 0.0, 20.0)
 
-    # ---- off the ball: formation anchors, pressing, receiving, goalkeeping ----------
+
+def off_ball_moves(view: TeamView, d: jax.Array, ball: jax.Array, ball_ahead: jax.Array,
+                   possession: tuple, receiver: jax.Array) -> tuple:
+    """Every player's run without the ball: formation anchors, pressing, receiving,
+    goalkeeping. (direction 0..8, wants sprint, slides) per player, in the team frame;
+    ``possession`` is (we have the ball, they have it, it is loose)."""
+    we_have, they_have, loose = possession
+    own, facing, u = view.own, view.facing, view.uniform
     # In possession the team stretches (forwards 0.25 ahead of the ball, wide wings);
     # without it the team sits compact between the ball and its own goal.
     attack_x = ball[0] * 0.6 + 0.25 + jnp.asarray(_FORM)[:, 0] * 0.7
@@ -223,30 +250,26 @@ def decide(state: FootballState, view: TeamView, difficulty: jax.Array, plan: tu
     want_sprint = (dist_target > 0.08) | chase
     facing_ball = dot2(facing, ball - own) > 0.7 * d_ball
     slide = chase & they_have & (d_ball < 0.035) & facing_ball & (u[:, 6] < 0.08 * d)
+    return move_dir, want_sprint, slide
 
-    carrier_dir, carrier_sprint, carrier_kick, pressed = plan
-    desired_dir = jnp.where(is_carrier, carrier_dir, move_dir)
-    want_sprint = jnp.where(is_carrier, carrier_sprint, want_sprint)
-    want_dribble = is_carrier & pressed
-    kick = jnp.where(is_carrier, carrier_kick, jnp.where(slide, C.SLIDING, 0))
 
-    # Low difficulty: now and then run a random way instead.
-    wander = u[:, 3] < 0.15 * (1.0 - d)
-    desired_dir = jnp.where(wander & ~is_carrier, 1 + jnp.floor(u[:, 4] * 8).astype(jnp.int32), desired_dir)
-
-    # ---- one action per player, honouring the sticky controls ------------------------
-    aim_dir = jnp.where(cur_dir > 0, cur_dir, quantize_direction(facing))
+def sticky_action(view: TeamView, kick: jax.Array, desired_dir: jax.Array,
+                  want_sprint: jax.Array, want_dribble: jax.Array) -> jax.Array:
+    """One action per player toward what he wants, honouring the sticky controls: a kick
+    once aimed, else the first of direction, sprint and dribble that differs from the
+    current one, else IDLE."""
+    cur_dir = view.cur_dir
+    aim_dir = jnp.where(cur_dir > 0, cur_dir, quantize_direction(view.facing))
     pass_ready = (kick >= C.LONG_PASS) & (kick <= C.SHORT_PASS) & (aim_dir == desired_dir)
     kick_ready = (kick == C.SHOT) | (kick == C.SLIDING) | pass_ready
-    action = jnp.where(
+    return jnp.where(
         (kick > 0) & kick_ready, kick,
         jnp.where(desired_dir != cur_dir, jnp.where(desired_dir > 0, desired_dir, C.RELEASE_DIRECTION),
-                  jnp.where(want_sprint != cur_sprint, jnp.where(want_sprint, C.SPRINT, C.RELEASE_SPRINT),
-                            jnp.where(want_dribble != cur_dribble,
-                                      jnp.where(want_dribble, C.DRIBBLE, C.RELEASE_DRIBBLE), C.IDLE))))
-    react = u[:, 2] < 0.15 + 0.85 * d
-    action = jnp.where(react, action, prev).astype(jnp.int32)
-    return jnp.where(team == 1, mirror_action(action), action)
+                  jnp.where(want_sprint != view.cur_sprint,
+                            jnp.where(want_sprint, C.SPRINT, C.RELEASE_SPRINT),
+                            jnp.where(want_dribble != view.cur_dribble,
+                                      jnp.where(want_dribble, C.DRIBBLE, C.RELEASE_DRIBBLE),
+                                      C.IDLE))))
 
 
 def all_actions(state: FootballState, difficulties: jax.Array, noise: Noise) -> jax.Array:

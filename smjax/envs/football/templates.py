@@ -111,8 +111,8 @@ def shoot_controller(key: jax.Array, state: FootballState, params) -> jax.Array:
 # Carrying the ball: how far ahead a direction must be clear of opponents, and how much
 # it must gain toward goal (cos of its angle to the goal line of sight: 0.3 ~ 72 degrees).
 # Against the hard AI, sideways dribbles and a walking carrier lose the ball (a carrier
-# free to walk anywhere conceded 1.9 goals a game on possession alone); a sprinting,
-# goal-ward carrier keeps it.
+# free to walk anywhere concedes about 1.9 goals a game on possession alone); a
+# sprinting, goal-ward carrier keeps it.
 FREE_LOOKAHEAD = 0.2
 FREE_MIN_GAIN = 0.3
 # Pass choice: interceptors in the lane count 1 each, then progress (0.5 per unit of x)
