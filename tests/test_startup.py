@@ -141,3 +141,23 @@ def test_a_failed_atomic_write_leaves_neither_file_nor_temporary(tmp_path, monke
     assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["a.json", "b.bin"]
     pc._save(tmp_path / "cache" / "p.bin", Exported(), None)
     assert (tmp_path / "cache" / "p.bin").stat().st_size > 0
+
+
+def test_a_cache_directory_the_user_chose_caches_small_programs_unless_told_otherwise(tmp_path):
+    # JAX caches only programs that took a second to compile unless told otherwise; a
+    # run has dozens of smaller ones, so smjax lowers the threshold, also in a directory
+    # the user chose, but keeps a threshold the user set
+    probe = ("import jax; from smjax.core.compile_cache import enable_compilation_cache; "
+             "print(enable_compilation_cache(), "
+             "jax.config.jax_persistent_cache_min_compile_time_secs)")
+
+    def answer(**extra):
+        env = {k: v for k, v in os.environ.items()
+               if not k.startswith(("JAX_COMPILATION_CACHE", "JAX_PERSISTENT_CACHE"))}
+        env |= {"JAX_PLATFORMS": "cpu", "JAX_COMPILATION_CACHE_DIR": str(tmp_path)} | extra
+        out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True,
+                             text=True, check=True).stdout.split()
+        return out[0], float(out[1])
+
+    assert answer() == (str(tmp_path), 0.0)
+    assert answer(JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="2.5") == (str(tmp_path), 2.5)

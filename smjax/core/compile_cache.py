@@ -8,10 +8,13 @@ executables from disk instead.
 Where the cache lives:
 
 * ``JAX_COMPILATION_CACHE_DIR`` (or ``jax.config.update("jax_compilation_cache_dir",
-  ...)``) set by the user: that directory, untouched;
+  ...)``) set by the user: that directory;
 * otherwise ``$SMJAX_CACHE_DIR``, else ``$XDG_CACHE_HOME/smjax/jax``, else
   ``~/.cache/smjax/jax``.
 
+Small programs are cached too (JAX's default keeps only those that took a second or more
+to compile, and a run has dozens of smaller ones), unless the user set
+``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` or the config value themselves.
 ``SMJAX_COMPILATION_CACHE=0`` (or ``false``/``off``/``no``) turns it off. Entries are
 keyed by JAX on the program, the JAX/XLA versions and the device, so a stale entry is
 never used for a different program; the directory can be deleted at any time.
@@ -24,6 +27,7 @@ from pathlib import Path
 import jax
 
 _OFF = ("0", "false", "off", "no")
+_JAX_MIN_COMPILE_TIME = 1.0  # JAX's default threshold (seconds) for caching a program
 
 
 def default_cache_dir() -> Path:
@@ -41,18 +45,19 @@ def enable_compilation_cache() -> str | None:
     """
     if os.environ.get("SMJAX_COMPILATION_CACHE", "1").strip().lower() in _OFF:
         return None
-    current = jax.config.jax_compilation_cache_dir
-    if current:
-        return current
-    path = default_cache_dir()
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return None  # an unwritable home must not stop training; it only loses the cache
-    jax.config.update("jax_compilation_cache_dir", str(path))
+    path = jax.config.jax_compilation_cache_dir
+    if not path:
+        path = default_cache_dir()
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            return None  # an unwritable home must not stop training; it only loses the cache
+        jax.config.update("jax_compilation_cache_dir", str(path))
     # Cache small programs too: a run compiles many (inits, evaluation, gate) and each
-    # costs the user seconds on a CPU.
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    # costs the user seconds on a CPU. A threshold the user chose stays.
+    if (jax.config.jax_persistent_cache_min_compile_time_secs == _JAX_MIN_COMPILE_TIME
+            and "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ):
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     _forget_earlier_decision()
     return str(path)
 
