@@ -4,8 +4,8 @@
 numeric field against ``INT_FIELDS`` / ``FLOAT_FIELDS``: booleans are never numbers, a
 numpy or JAX scalar of the right kind counts as its Python value, and every field has an
 upper bound, so a value that would overflow an int32 counter or a buffer is refused
-before anything compiles instead of failing after training (an evaluation of 2**31 ticks
-ended a finished run with an OverflowError). The learner's fields are checked by its own
+before anything compiles, not after training (an evaluation of 2**31 ticks would end a
+finished run with an OverflowError). The learner's fields are checked by its own
 config (``smjax.agents``); ``check_agent`` adds what depends on the run's batch.
 """
 from __future__ import annotations

@@ -20,8 +20,8 @@ its files), which a resume verifies; a step can be resumed from its manifest alo
 
 A save that fails (read-only or full file system, I/O error) raises ``CheckpointError``
 at once, in one line: the folder is probed first, orbax creates the step directory in the
-calling thread (a failure there left its writer threads waiting ~300 s), and orbax's own
-tracebacks of the failure are kept off the terminal.
+calling thread, and orbax's own tracebacks of the failure are kept off the terminal
+(``smjax.train.checkpoint_orbax``).
 
 With several processes only process 0 touches the directory: the trainer gathers the
 arrays to host numpy first, orbax runs on process 0 alone (its barriers limited to that
@@ -31,18 +31,12 @@ resumes the other's checkpoints.
 """
 from __future__ import annotations
 
-import contextlib
-import errno
 import gc
-import io
 import json
-import logging
 import os
 import shutil
-import sys
 import threading
 import time
-import traceback
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +44,8 @@ import jax
 
 from smjax.train import distributed as dist
 from smjax.train import manifest as mf
+from smjax.train.checkpoint_orbax import (checkpointer, first_line, flat_leaves, is_disk_full,
+                                          quiet_orbax)
 from smjax.train.outdir import probe_file
 from smjax.core.files import atomic_write_text, fsync_dir
 
@@ -64,95 +60,12 @@ def checkpoint_dir(out_dir: str | Path) -> Path:
     return Path(out_dir) / "checkpoints"
 
 
-def _flat(arrays: Any) -> dict:
-    """Leaves by position, without zero-size ones (orbax refuses them; e.g. MJX's empty
-    ``act``): restoring takes those from the template, where they are empty as well."""
-    return {str(i): x for i, x in enumerate(jax.tree.leaves(arrays)) if x.size > 0}
-
-
-def _checkpointer():
-    import orbax.checkpoint as ocp
-
-    kwargs = {}
-    try:
-        # The step directory is created in the calling thread, so a failure to create it
-        # (read-only or full file system) raises at once: created in a background thread,
-        # its failure left orbax's writer threads waiting ~300 s for the directory.
-        kwargs["async_options"] = ocp.options.AsyncOptions(create_directories_asynchronously=False)
-    except (AttributeError, TypeError):  # an orbax without the option
-        pass
-    if dist.is_multiprocess():
-        # only process 0 calls orbax; without this its barriers would wait for the others
-        kwargs["multiprocessing_options"] = ocp.options.MultiprocessingOptions(
-            primary_host=0, active_processes={0})
-    return ocp.StandardCheckpointer(**kwargs)
-
-
-class _QuietOrbax(logging.Filter):
-    """Drops orbax's log records (and asyncio's about orbax's tasks) while a save runs."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        where = f"{os.sep}orbax{os.sep}"
-        return where not in (record.pathname or "") and where not in record.getMessage()
-
-
-class _OrbaxFutureNoise(logging.Filter):
-    """asyncio's "exception was never retrieved" reports about the futures of a failed
-    orbax save, which surface whenever they are garbage collected (often at exit, after
-    ``save_checkpoint`` has reported the failure): one per file, tens of tracebacks."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        text = record.getMessage()
-        if record.exc_info and record.exc_info[2] is not None:
-            text += "".join(traceback.format_tb(record.exc_info[2]))
-        return "orbax" not in text
-
-
-_FUTURE_NOISE = _OrbaxFutureNoise()
-
-
-@contextlib.contextmanager
-def _quiet_orbax():
-    """A failed save makes orbax log every writer thread's traceback and its I/O library
-    print more (hundreds of lines); ``save_checkpoint`` reports a failure itself, in one
-    line. What the save prints on stderr is held back and passed on only if it succeeds
-    (the caller sets ``state["failed"]``)."""
-    loggers = [logging.getLogger(name) for name in ("absl", "asyncio", "")]
-    quiet, held, state = _QuietOrbax(), io.StringIO(), {"failed": False}
-    if _FUTURE_NOISE not in loggers[1].filters:  # for the life of the process
-        loggers[1].addFilter(_FUTURE_NOISE)
-    for logger in loggers:
-        logger.addFilter(quiet)
-    try:
-        with contextlib.redirect_stderr(held):
-            yield state
-    except BaseException:
-        state["failed"] = True
-        raise
-    finally:
-        for logger in loggers:
-            logger.removeFilter(quiet)
-        if not state["failed"] and held.getvalue():
-            sys.stderr.write(held.getvalue())
-
-
-def _is_disk_full(err: BaseException) -> bool:
-    text = str(err)
-    return ((isinstance(err, OSError) and err.errno == errno.ENOSPC) or "No space left" in text
-            or ("RESOURCE_EXHAUSTED" in text and "writ" in text.lower()))
-
-
 def _write_failure(target: Path, root: Path, err: BaseException) -> str:
     kept = f"the previous checkpoint in {root} is kept"
-    if _is_disk_full(err):
-        return (f"disk full: could not write checkpoint {target} ({_first_line(err)}); {kept}; "
+    if is_disk_full(err):
+        return (f"disk full: could not write checkpoint {target} ({first_line(err)}); {kept}; "
                 f"free space, then --resume the run")
-    return f"could not write checkpoint {target} ({_first_line(err)}); {kept}"
-
-
-def _first_line(err: BaseException) -> str:
-    text = str(err).strip().splitlines()
-    return f"{type(err).__name__}: {text[0] if text else ''}"[:300]
+    return f"could not write checkpoint {target} ({first_line(err)}); {kept}"
 
 
 def _check_writable(root: Path) -> None:
@@ -219,14 +132,14 @@ def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> 
     failure = None
     before = set(threading.enumerate())
     try:
-        checkpointer = _checkpointer()
-        with _quiet_orbax() as quiet:
+        writer = checkpointer()
+        with quiet_orbax() as quiet:
             try:
                 try:
-                    checkpointer.save(target, _flat(arrays))
-                    checkpointer.wait_until_finished()
+                    writer.save(target, flat_leaves(arrays))
+                    writer.wait_until_finished()
                 finally:
-                    checkpointer.close()  # no writer thread outlives the save
+                    writer.close()  # no writer thread outlives the save
             except Exception as err:  # disk full, read-only, I/O error
                 quiet["failed"] = True
                 failure = _write_failure(target, root, err)
@@ -282,7 +195,7 @@ def _find_meta(root: Path, step: str | None) -> tuple[dict | None, Path]:
     try:
         info = json.loads(latest.read_text())
     except (OSError, ValueError) as err:
-        raise CheckpointError(f"{latest} is unreadable or not valid JSON ({_first_line(err)}); "
+        raise CheckpointError(f"{latest} is unreadable or not valid JSON ({first_line(err)}); "
                               f"{fix}") from None
     # (the meta's own fields are checked by ``mf.check_meta``, which names the bad one)
     ok = (isinstance(info, dict) and isinstance(info.get("path"), str)
@@ -320,7 +233,7 @@ def verify_step(out_dir: str | Path, info: dict) -> None:
     manifest = mf.read_manifest(root / info["path"])
     problem = "it has no manifest" if manifest is None else mf.damage(root / info["path"], manifest)
     if problem is None or (manifest is None and info["meta"].get("format", 1) < 5):
-        return  # intact, or written before steps carried manifests
+        return  # intact, or of format 4 or older, whose steps carry no manifest
     others = [p.name for p in mf.steps_newest_first(root) if p.name != info["path"]]
     offer = (f"resume the previous step with --resume-from {others[0]}" if others else
              "no other step is kept: start again with --overwrite")
@@ -360,12 +273,12 @@ def load_arrays(out_dir: str | Path, like: Any, step: str | None = None,
         verify_step(out_dir, info)
     if dist.is_multiprocess():
         # process 0 alone reads, into host numpy (``like`` holds numpy), then broadcasts
-        abstract = _flat(like)
+        abstract = flat_leaves(like)
     else:
-        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, _flat(like))
+        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, flat_leaves(like))
     path = (checkpoint_dir(out_dir) / info["path"]).resolve()
     try:
-        restored = _checkpointer().restore(path, abstract)
+        restored = checkpointer().restore(path, abstract)
     except Exception as err:  # truncated or corrupt data: orbax chains a long traceback
         said = str(err).lower()
         if "structure" in said and "match" in said:  # intact, but laid out by other code
@@ -374,7 +287,7 @@ def load_arrays(out_dir: str | Path, like: Any, step: str | None = None,
                 f"(it was written by another smjax version, e.g. a DQN run from before DQN's "
                 f"exploration and target settings became sweepable); resume it with the smjax "
                 f"version that wrote it, or train again in another directory") from None
-        raise CheckpointError(f"checkpoint data in {path} cannot be read ({_first_line(err)}); "
+        raise CheckpointError(f"checkpoint data in {path} cannot be read ({first_line(err)}); "
                               f"it is truncated or corrupt: restore it or start again with "
                               f"--overwrite") from None
     leaves, treedef = jax.tree.flatten(like)

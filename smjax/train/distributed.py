@@ -82,8 +82,9 @@ def resolve(coordinator: str | None = None, num_processes: int | None = None,
 
 
 def _use_gloo_on_cpu() -> None:
-    # Cross-process collectives on XLA:CPU need an implementation; older jax defaulted
-    # to none. Must be set before the CPU backend starts; a user's choice is kept.
+    # Cross-process collectives on XLA:CPU need an implementation, and some jax versions
+    # select none by default. Must be set before the CPU backend starts; a user's choice
+    # is kept.
     try:
         current = jax.config.jax_cpu_collectives_implementation
     except AttributeError:  # a jax without the option: nothing to select

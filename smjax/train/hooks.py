@@ -24,9 +24,10 @@ from smjax.train.restorable import check_restorable
 from smjax.train.stages import Scalar, SeedStatus
 from smjax.train.state import TrainArrays, TrainerState
 
-# 2: learner states carry their hyper-parameters (state.hp); 3: success windows are arrays;
-# 4: the levels' bank (fine-tuning hands back the better hierarchy); 5: every step carries
-# a manifest of checksums (the arrays are laid out as in 4)
+# what a checkpoint of each format holds: 2: learner states with their hyper-parameters
+# (state.hp), the success windows as host lists; 3: the success windows as arrays; 4: also
+# the levels' bank (fine-tuning hands back the better hierarchy); 5: format 4's arrays and
+# host state, and a manifest of checksums in every step
 CHECKPOINT_FORMAT = 5
 
 

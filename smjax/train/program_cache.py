@@ -12,7 +12,7 @@ the same key loads the export and compiles it (a hit in JAX's cache) without tra
   XLA flags and the JAX settings that change what is compiled.
 
 A run whose programs depend on code outside smjax (a user's environment or hierarchy
-object) passes no identity, and is traced as before. Entries live beside JAX's cache, under
+object) passes no identity, and is traced every time. Entries live beside JAX's cache, under
 ``smjax-programs/``, and go with it (``SMJAX_COMPILATION_CACHE=0`` turns both off); a file
 that fails to load is deleted and the program traced again.
 """

@@ -14,7 +14,8 @@ from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
 from smjax.train.manifest import check_host
 
-# the oldest checkpoint format a resume migrates (learner states carry their hyper-parameters)
+# the oldest checkpoint format a resume migrates (the first whose learner states hold their
+# hyper-parameters)
 OLDEST_FORMAT = 2
 
 

@@ -1,4 +1,4 @@
-"""results.json and curves.csv, in the format docs/guide.md section 5 describes.
+"""results.json and curves.csv, in the format docs/guide.md ("Results format") describes.
 
 curves.png is drawn above this layer (``smjax.viz.plots.plot_run``, which reads these
 files): training never imports plotting."""
@@ -15,10 +15,10 @@ from smjax.core.files import atomic_write_text, json_safe
 from smjax.core.version import smjax_version
 
 # running_success: the mean success over the last success_window learner episodes (the
-# level's learner; in fine-tuning, whole-task episodes). Files written before it had this
-# name call the column "avg_return"; ``read_curves`` renames it.
+# level's learner; in fine-tuning, whole-task episodes). The curves.csv of an smjax that
+# names it "avg_return" is read as well: ``read_curves`` renames it.
 CURVE_COLUMNS = ("seed", "level", "template", "episodes", "env_steps", "running_success")
-OLD_NAMES = {"avg_return": "running_success"}
+COLUMN_ALIASES = {"avg_return": "running_success"}
 
 
 class ResultsError(RuntimeError):
@@ -76,7 +76,8 @@ def _finetune_summary(record: dict | None, config: dict) -> dict | None:
     of its plateau blocks, final_success before it, its turns (joint: one); where
     no gate passed, the fine-tuned hierarchy's check (``check_success``) and which one the
     phase handed back (``kept``: "fine-tuned" or "levels", the better of the two;
-    ``baseline`` False: the levels' bank was lost to a resume from an older checkpoint)."""
+    ``baseline`` False: the phase started in a checkpoint without the levels' bank, format
+    3 or older)."""
     if record is None:
         return None
     return {
@@ -131,7 +132,7 @@ def write_sweep(out_dir: str | Path, sweep: dict) -> None:
 
 
 def read_curves(path: str | Path) -> list[dict]:
-    """curves.csv rows as dicts (old column names renamed)."""
+    """curves.csv rows as dicts (a column under an alias renamed: ``COLUMN_ALIASES``)."""
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
-    return [{OLD_NAMES.get(k, k): v for k, v in row.items()} for row in rows]
+    return [{COLUMN_ALIASES.get(k, k): v for k, v in row.items()} for row in rows]

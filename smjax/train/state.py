@@ -4,17 +4,17 @@
 bank and which options are learned). ``TrainerState`` is the host state the loop decides
 with: per seed its stage, the counters of the level (or fine-tuning turn) it trains
 (``LevelCounters``) and of fine-tuning (``FinetuneCounters``), and the run's records
-(results.json's levels, the curves). Both are stored in the layout of checkpoint format 4
-(the host state as JSON with one list over seeds per counter; the arrays by leaf
-position). Format 3 had no levels' bank (``TrainArrays.levels_bank``, the last leaves)
-nor the keep-the-better counters; format 2 also kept the running-success windows in the
-host JSON (``history``, ``task_history``) instead of the arrays (``SuccessWindow``). Both
-are migrated on restore (``TrainArrays.migrated``, ``TrainerState.from_json``).
+(results.json's levels, the curves). Both are stored in the layout of checkpoint formats
+4 and 5 (the host state as JSON with one list over seeds per counter; the arrays by leaf
+position). Format 3 has no levels' bank (``TrainArrays.levels_bank``, the last leaves)
+nor the keep-the-better counters; format 2 also holds the running-success windows in the
+host JSON (``history``, ``task_history``), not as arrays (``SuccessWindow``). Both are
+migrated on restore (``TrainArrays.migrated``, ``TrainerState.from_json``).
 
 The running-success windows are ring buffers on the device, updated inside the compiled
 chunk after every update; the chunk returns, per update, which batches form the window
 (their float32 totals, newest first) and its episodes; the host keeps no window and only
-reduces those in float64 (``_Counters._count``), exactly as it did over its own lists.
+reduces those in float64 (``_Counters._count``).
 """
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ class SuccessWindow:
     @classmethod
     def from_lists(cls, histories: list[list], slots: int) -> "SuccessWindow":
         """Windows holding these host lists of ``[total, count]`` batches, oldest first
-        (what checkpoint format 2 stored as ``history``/``task_history``: already trimmed
+        (what checkpoint format 2 stores as ``history``/``task_history``: already trimmed
         to the batches the window needs, so at most ``slots`` of them)."""
         total = np.zeros((len(histories), slots), np.float32)
         count = np.zeros((len(histories), slots), np.int32)
@@ -61,7 +61,7 @@ class SuccessWindow:
         for s, history in enumerate(histories):
             batches = history[-slots:]
             for i, (t, c) in enumerate(batches):
-                # the old totals were float32 sums read as Python floats: exact in float32
+                # format 2's totals are float32 sums stored as Python floats: exact in float32
                 total[s, i], count[s, i] = t, c
             nxt[s] = len(batches) % slots
         return cls(total=jnp.asarray(total), count=jnp.asarray(count), next=jnp.asarray(nxt))
@@ -73,11 +73,11 @@ class SuccessWindow:
         their episodes (0: fewer than ``size`` so far, no running success yet).
 
         The sum is left to the host (``_Counters._count``): it adds these float32 totals
-        in float64, newest first, and divides, the very operations it ran over its own
-        lists before (format 2), so the running success is the same to the last bit and
-        so is every decision on it. A float32 sum on the device would be exact only for
-        integer batch totals, and successes are not always 0/1 (e.g. craft's make_stick
-        F_o): it moved curves' last digits."""
+        in float64, newest first, and divides, so the running success, and every decision
+        on it, is the same to the last bit as the mean of a host list of the batches
+        (format 2's windows). A float32 sum on the device is exact only for integer batch
+        totals, and successes are not always 0/1 (e.g. craft's make_stick F_o): it would
+        move the curves' last digits."""
         K = self.count.shape[-1]
         add = count > 0
         at = self.next
@@ -96,10 +96,10 @@ class SuccessWindow:
 
 @struct.dataclass
 class TrainArrays:
-    """The device state, per seed (leading axis). The fields are in the order of the dict
-    that checkpoints of earlier versions were written from (leaves are stored by position;
-    the windows came last in format 3, the levels' bank in format 4, so an older
-    checkpoint's leaves are a prefix)."""
+    """The device state, per seed (leading axis). A checkpoint stores the leaves by
+    position, so the fields are in the order the formats add them: format 2 holds the
+    first four, format 3 adds the windows, format 4 the levels' bank; an older format's
+    leaves are a prefix of a newer one's."""
     bank: Any      # the policy bank: params [S, num_options, ...]
     keys: jax.Array
     learned: jax.Array  # [S, num_options] bool
@@ -151,8 +151,9 @@ class _Counters:
         for e, batches, n in zip(episodes, totals, seen):
             self.episodes += int(e)
             self.env_steps += steps_per_update
-            # a sequential float64 sum, newest first (cumsum does not pair up terms): the
-            # old lists' arithmetic on the same float32 totals (zeros past the window add 0)
+            # a sequential float64 sum, newest first (cumsum does not pair up terms as
+            # np.sum does): a host list's arithmetic on these float32 totals (zeros past
+            # the window add 0)
             total = float(np.cumsum(np.asarray(batches, np.float64))[-1])
             rows.append((self.episodes, self.env_steps, total / int(n) if n else None))
         return rows
@@ -210,8 +211,9 @@ class FinetuneCounters(_Counters):
     turns: list = field(default_factory=list)  # [{"template", "episodes", "running_success"}]
     # where the gate never passed: the fine-tuned hierarchy's success on fresh episodes at
     # the phase's end, and which bank the phase handed back ("fine-tuned" or "levels": the
-    # better of the two); baseline: the levels' bank was kept when the phase started (not
-    # where it started before a resume from a checkpoint of format 3 or older)
+    # better of the two); baseline: the levels' bank was kept when the phase started
+    # (False where the phase started in a checkpoint of format 3 or older, which holds no
+    # levels' bank)
     check_success: float | None = None
     kept: str | None = None
     baseline: bool = False
@@ -290,7 +292,7 @@ class TrainerState:
         """Record seed ``s``'s level in its results entry; on to its next stage."""
         record, counters = self.levels[self.stage[s]], self.level[s]
         for name, key in RECORD_KEYS.items():
-            # (a record resumed from a checkpoint written before gate_uncalled lacks it)
+            # (a level record of a format 2 to 4 checkpoint may lack gate_uncalled)
             record.setdefault(name, [None] * len(self.stage))[s] = getattr(counters, key)
         self.stage[s] += 1
         self.started[s] = False
