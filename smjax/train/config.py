@@ -159,13 +159,6 @@ class TrainConfig:
         # the learner's overrides as JSON stores them, so a resumed run compares equal
         object.__setattr__(self, "agent", normalize_agent(self.algo, self.agent))
 
-    def validate(self) -> None:
-        """Check every field again (making a config checks it: this is for a caller that
-        set a field behind the frozen dataclass's back)."""
-        field_values(self)
-        check_fields(self)
-        level_configs(self)
-
     @property
     def finetune_on(self) -> bool:
         """Whether the fine-tuning phase runs ("auto": for top-down)."""
