@@ -50,6 +50,33 @@ def test_the_shipped_config_files_load_and_build_their_learner():
     assert fast.agent == {"update_epochs": 8} and fast.finetune_max_episodes == 12000
 
 
+def test_a_config_resolves_its_levels_and_learner_once_when_it_is_made():
+    cfg = TrainConfig(gamma=0.95, agent={"hidden_sizes": (16, 16)},
+                      levels={"give_key": {"threshold": np.float32(0.5), "gamma": 0.9}})
+    assert cfg.agent == {"hidden_sizes": [16, 16]}  # as JSON stores it, without resolve_config
+    key, other = cfg.for_level("give_key"), cfg.for_level("open_door")
+    assert (key.threshold, key.gamma, key.success_window) == (0.5, 0.9, cfg.success_window)
+    assert (other.threshold, other.gamma) == (cfg.threshold, 0.95)
+    assert cfg.for_level("give_key") is key  # looked up, not made again
+    assert cfg.window_slots == cfg.success_window
+
+
+def test_resolve_run_checks_level_names_and_records_the_reachable_root(tmp_path):
+    import smjax
+    from smjax.train.plans import resolve_run
+
+    env, _ = smjax.make("craft/make_bench", observation="none")
+    cfg = TrainConfig(hierarchy="recipe", levels={"give_hammer": {"threshold": 0.9}})
+    with pytest.warns(UserWarning, match="root level ends at 0.72"):
+        plan = resolve_run(env, cfg)
+    assert plan.cfg.levels == {"give_hammer": {"threshold": 0.9},
+                               "make_bench": {"threshold": pytest.approx(0.72)}}
+    assert plan.plans[0].name == "make_bench" and plan.hierarchy_name == "recipe"
+    with pytest.raises(ConfigError, match="does not train"):
+        resolve_run(env, TrainConfig(hierarchy="recipe", threshold=0.5,
+                                     levels={"give_hamer": {"threshold": 0.5}}))
+
+
 def test_settings_that_do_not_change_results_are_not_the_run_identity():
     identity = run_identity("craft/get_wood", TrainConfig(tensorboard=True), [0], {})
     assert not set(RUN_SETTINGS) & set(identity)

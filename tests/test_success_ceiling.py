@@ -91,7 +91,8 @@ def test_a_run_ends_its_root_level_below_a_declared_ceiling_and_records_it(tmp_p
                       ceiling_fraction=0.6, max_episodes_per_level=400, success_window=64, eval_envs=32,
                       checkpoint_every=0.0)
     out = tmp_path / "run"
-    res = run((env, params), cfg, [0], out, progress=False, hierarchy=h)
+    with pytest.warns(UserWarning, match=r"the root level ends at 0\.3 \(ceiling_fraction 0\.6"):
+        res = run((env, params), cfg, [0], out, progress=False, hierarchy=h)
     assert res["config"]["levels"] == {"open_door": {"threshold": 0.3}}
     root = res["levels"][0]
     assert root["template"] == "open_door" and root["reached"] == [True]

@@ -3,27 +3,32 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from smjax.options.memory import POLICY_MEMORIES
-from smjax.train.bounds import (BoundsError, check_agent, checked_fields, short, short_message,
-                                strict_json, strict_yaml)
-
-METHODS = ("top-down", "bottom-up", "flat")
-ALGOS = ("ppo", "dqn", "actor-critic")
-FROZEN_POLICIES = ("auto", "greedy", "sample")
-FINETUNE_CHOICES = ("auto", "on", "off")
-FINETUNE_MODES = ("turns", "joint")
-# what ``TrainConfig.levels`` may override per template
-LEVEL_FIELDS = ("threshold", "max_episodes_per_level", "max_steps_per_level", "success_window",
-                "gamma")
+from smjax.train.bounds import short, strict_json, strict_yaml
+from smjax.train.config_checks import (  # noqa: F401 - re-exported: the config's vocabulary
+    ALGOS, FINETUNE_CHOICES, FINETUNE_MODES, FROZEN_POLICIES, LEVEL_FIELDS, METHODS, ConfigError,
+    check_fields, field_values, level_configs, normalize_agent, parsed_fields,
+)
 
 
-class ConfigError(ValueError):
-    """An invalid configuration value; the message names the field and the allowed range."""
+@dataclass(frozen=True)
+class LevelSettings:
+    """What one level trains with: the config's ``LEVEL_FIELDS``, with that level's
+    ``levels`` overrides applied (``gamma``: the level's own discount, else the config's;
+    a sweep's per-slot discount gives way to a level's own: ``smjax.train.slots``)."""
+
+    threshold: float
+    max_episodes_per_level: int
+    max_steps_per_level: int
+    success_window: int
+    gamma: float
+
+    @classmethod
+    def of(cls, cfg) -> "LevelSettings":
+        return cls(**{name: getattr(cfg, name) for name in LEVEL_FIELDS})
 
 
 @dataclass(frozen=True)
@@ -145,91 +150,15 @@ class TrainConfig:
     levels: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        try:  # numpy scalars become Python numbers; every bound is in one table
-            values = checked_fields({f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
-        except BoundsError as err:
-            raise ConfigError(str(err)) from None
-        for name, value in values.items():
+        for name, value in field_values(self).items():  # numpy scalars become Python numbers
             object.__setattr__(self, name, value)
-        self.validate()
-
-    def validate(self) -> None:
-        def need(ok: bool, name: str, allowed: str) -> None:
-            if not ok:
-                raise ConfigError(f"config field {name!r} = {short(getattr(self, name))}: must "
-                                  f"be {allowed}")
-
-        try:
-            checked_fields({f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
-        except BoundsError as err:
-            raise ConfigError(str(err)) from None
-        need(self.method in METHODS, "method", f"one of {METHODS}")
-        need(self.algo in ALGOS, "algo", f"one of {ALGOS}")
-        need(self.hierarchy is None or isinstance(self.hierarchy, str), "hierarchy", "a name or None")
-        need(self.policy_memory in POLICY_MEMORIES, "policy_memory", f"one of {POLICY_MEMORIES}")
-        need(self.frozen_eval in ("auto", "learned", "all"), "frozen_eval",
-             "one of ('auto', 'learned', 'all')")
-        need(self.finetune in FINETUNE_CHOICES, "finetune", f"one of {FINETUNE_CHOICES}")
-        need(self.finetune_mode in FINETUNE_MODES, "finetune_mode", f"one of {FINETUNE_MODES}")
-        need(self.frozen_policy in FROZEN_POLICIES, "frozen_policy", f"one of {FROZEN_POLICIES}")
-        need(isinstance(self.tensorboard, bool), "tensorboard", "true or false")
-        need(isinstance(self.continue_episodes, bool), "continue_episodes", "true or false")
-        need(isinstance(self.gate, bool), "gate", "true or false")
-        need(isinstance(self.finetune_side_cost, bool), "finetune_side_cost", "true or false")
-        need(isinstance(self.finetune_continue_episodes, bool), "finetune_continue_episodes",
-             "true or false")
-        need(isinstance(self.agent, dict), "agent", "a mapping of learner hyper-parameters")
-        need(isinstance(self.finetune_agent, dict) and all(
-            isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
-            and math.isfinite(v) for k, v in self.finetune_agent.items()),
-             "finetune_agent", "a mapping of learner hyper-parameter names to numbers")
-        if "gamma" in self.agent:  # one source: the trainer discounts with TrainConfig.gamma
-            raise ConfigError(f"agent field 'gamma' = {self.agent['gamma']!r} would be ignored: the "
-                              f"discount is the config field 'gamma'; set it with --set gamma=X "
-                              f"(TrainConfig(gamma=X))")
-        self._check_agent()
-        need(isinstance(self.levels, dict) and all(isinstance(k, str) and isinstance(v, dict)
-                                                   for k, v in self.levels.items()),
-             "levels", "a mapping of template name -> {field: value}")
-        if self.success_window > self.max_episodes_per_level:
-            raise ConfigError(
-                f"config field 'success_window' = {self.success_window} exceeds "
-                f"'max_episodes_per_level' = {self.max_episodes_per_level}: the running success "
-                f"would never fill its window within the level's episode budget, so the threshold "
-                f"could never be reached; lower success_window (--set success_window=N) or raise "
-                f"max_episodes_per_level")
-        for name, fields in self.levels.items():
-            unknown = sorted(set(fields) - set(LEVEL_FIELDS), key=repr)
-            if unknown:
-                raise ConfigError(f"config field 'levels' for template {name!r}: unknown field(s) "
-                                  f"{unknown}; per-level fields: {list(LEVEL_FIELDS)}")
-            try:  # validates the override values, and the level's window against its budget
-                dataclasses.replace(self, levels={}, **fields)
-            except ConfigError as err:
-                raise ConfigError(f"config field 'levels' for template {name!r}: {err} (set both "
-                                  f"in levels[{name!r}] if only this level differs)") from None
-
-    def _check_agent(self) -> None:
-        """The learner's fields (unknown ones too), the fine-tuning overrides on top of them,
-        and what the run's batch bounds (``bounds.check_agent``)."""
-        from smjax.agents import make_config
-
-        if self.algo not in ALGOS:
-            return
-        try:
-            agent = normalize_agent(self.algo, self.agent)
-            config = make_config(self.algo, **agent)
-            check_agent(config, self.num_envs, self.rollout_ticks)
-        except (ValueError, TypeError) as err:
-            raise ConfigError(short_message(str(err))) from None
-        tuning = normalize_agent(self.algo, self.finetune_agent)
-        try:
-            # a learning rate of 0 freezes what fine-tuning would move: allowed here alone
-            if tuning.get("learning_rate") == 0 and not isinstance(tuning["learning_rate"], bool):
-                tuning = tuning | {"learning_rate": agent.get("learning_rate", 1e-3)}
-            make_config(self.algo, **(agent | tuning))
-        except (ValueError, TypeError) as err:
-            raise ConfigError(short_message(f"config field 'finetune_agent': {err}")) from None
+        check_fields(self)
+        # every level's settings are checked and resolved here, once: a frozen config
+        # cannot change, so ``for_level`` only looks them up
+        levels = {name: LevelSettings.of(c) for name, c in level_configs(self).items()}
+        object.__setattr__(self, "_level_settings", (LevelSettings.of(self), levels))
+        # the learner's overrides as JSON stores them, so a resumed run compares equal
+        object.__setattr__(self, "agent", normalize_agent(self.algo, self.agent))
 
     @property
     def finetune_on(self) -> bool:
@@ -245,12 +174,14 @@ class TrainConfig:
     def window_slots(self) -> int:
         """Batches a running-success window keeps on the device: the largest
         ``success_window`` of any level (each kept batch holds at least one episode)."""
-        return max([self.success_window] + [int(v.get("success_window", 0))
-                                            for v in self.levels.values()])
+        return max([self.success_window] + [level.success_window
+                                            for level in self._level_settings[1].values()])
 
-    def for_level(self, template: str) -> "TrainConfig":
-        """The config a level trains with: this one plus ``levels[template]``'s overrides."""
-        return dataclasses.replace(self, levels={}, **self.levels.get(template, {}))
+    def for_level(self, template: str) -> LevelSettings:
+        """The settings level ``template`` trains with: the config's, plus
+        ``levels[template]``'s overrides."""
+        base, levels = self._level_settings
+        return levels.get(template, base)
 
     def check_level_names(self, names) -> None:
         """Refuse overrides for templates the run does not train (a typo would be silent)."""
@@ -279,7 +210,7 @@ class TrainConfig:
             maybe = f" Did you mean {', '.join(repr(m) for m in close)}?" if close else ""
             raise ConfigError(f"unknown config field(s) {short(unknown)}.{maybe} Valid fields: "
                               f"{sorted(names)}")
-        return cls(**_parsed_fields(cls, data))
+        return cls(**parsed_fields(cls, data))
 
     @classmethod
     def from_file(cls, path: str | Path) -> "TrainConfig":
@@ -294,8 +225,8 @@ RUN_SETTINGS = ("tensorboard", "checkpoint_every")
 def resolve_config(base: TrainConfig | None = None, *, saved_run: dict | None = None,
                    file: str | Path | None = None, sets: dict | None = None,
                    agent: dict | None = None) -> TrainConfig:
-    """The one place a run's configuration is assembled (``smjax train`` and ``run`` call
-    it). Later sources override
+    """The one place a run's configuration is assembled from its sources (``smjax train``
+    calls it; ``run`` takes its result, or any ``TrainConfig``). Later sources override
     earlier ones: ``base`` (a config, else the defaults), the fields a saved run recorded
     (``saved_run``: a checkpoint's run identity; its other keys are ignored), the fields a
     ``file`` sets, ``sets`` (field -> value), and ``agent``, merged into the learner's
@@ -313,12 +244,9 @@ def resolve_config(base: TrainConfig | None = None, *, saved_run: dict | None = 
                               f"a training setting; use --set gamma={agent['gamma']}")
         data["agent"] = dict(data.get("agent", base.agent if base is not None else {})) | agent
     if base is None:
-        cfg = TrainConfig.from_dict(data)
-    elif data:
-        cfg = TrainConfig.from_dict(base.to_dict() | data)
-    else:
-        cfg = base
-    return cfg.replace(agent=normalize_agent(cfg.algo, cfg.agent))
+        return TrainConfig.from_dict(data)
+    # (a config normalises its learner's overrides when it is made: ``base`` already has)
+    return TrainConfig.from_dict(base.to_dict() | data) if data else base
 
 
 def read_config_file(path: str | Path) -> dict:
@@ -343,43 +271,7 @@ def read_config_file(path: str | Path) -> dict:
         TrainConfig.from_dict(data)
     except (ConfigError, TypeError, ValueError) as err:
         raise ConfigError(f"config file {path}: {err}") from None
-    return _parsed_fields(TrainConfig, data)
-
-
-def _parsed_fields(cls, data: dict) -> dict:
-    """``data`` with scalar values parsed by the type of the field's default."""
-    from smjax.core.overrides import coerce_like
-
-    defaults = {f.name: f.default for f in dataclasses.fields(cls)
-                if f.default is not dataclasses.MISSING}
-    out = dict(data)
-    try:
-        for name, value in data.items():
-            if name in defaults and defaults[name] is not None:
-                out[name] = coerce_like(f"config field {name!r}", value, defaults[name])
-        if isinstance(out.get("agent"), dict):
-            out["agent"] = normalize_agent(out.get("algo", cls.algo), out["agent"])
-    except ValueError as err:
-        raise ConfigError(str(err)) from None
-    return out
-
-
-def normalize_agent(algo: Any, agent: dict) -> dict:
-    """Learner overrides parsed by the type of the learner config's field (``"no"`` -> False,
-    ``(32, 32)`` -> [32, 32], as JSON stores it, so a resumed run compares equal)."""
-    from smjax.core.overrides import coerce_like
-
-    if algo not in ALGOS:
-        return dict(agent)  # validate() names the bad algo
-    from smjax.agents import default_config
-
-    defaults = dataclasses.asdict(default_config(algo))
-    out = {}
-    for name, value in agent.items():
-        if name in defaults:
-            value = coerce_like(f"agent field {name!r}", value, defaults[name])
-        out[name] = list(value) if isinstance(value, tuple) else value
-    return out
+    return parsed_fields(TrainConfig, data)
 
 
 def config_differences(a: dict, b: dict) -> list[str]:

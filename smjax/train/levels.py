@@ -11,7 +11,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from smjax.train import distributed as dist
-from smjax.train.config import TrainConfig
+from smjax.train.config import LevelSettings, TrainConfig
 from smjax.train.plans import LevelPlan
 from smjax.train.seed_arrays import fold_in, freeze
 from smjax.train.slots import Slots
@@ -55,7 +55,7 @@ class LevelStage:
         """Seed ``s``'s level (a seed past every level: the last one)."""
         return self.plans[min(st.stage[s], len(self.plans) - 1)]
 
-    def level_cfg(self, st: TrainerState, s: int) -> TrainConfig:
+    def level_cfg(self, st: TrainerState, s: int) -> LevelSettings:
         return self.cfg.for_level(self.plan(st, s).name)
 
     def controls(self, st: TrainerState, s: int) -> SeedControls:
@@ -140,7 +140,7 @@ class LevelStage:
         passed, scalars = [], []
         for s in due:
             c, level = st.level[s], self.level_cfg(st, s)
-            success = c.record_gate(result, s, st.chunks + level.gate_interval)
+            success = c.record_gate(result, s, st.chunks + self.cfg.gate_interval)
             tag = level_tag(self.slots.seeds[s], self.plan(st, s))
             scalars += [Scalar(f"{tag}/gate_success", success, c.env_steps),
                         Scalar(f"{tag}/gate_uncalled", c.gate_uncalled, c.env_steps)]

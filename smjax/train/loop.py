@@ -70,7 +70,6 @@ class HierarchyTrainer:
         (default: ``default_hooks``)."""
         cfg = self.cfg = engine.cfg
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
-        cfg.check_level_names([p.name for p in plans])
         S = len(self.seeds)
         self.slots = Slots(self.seeds, gamma if gamma is not None else [cfg.gamma] * S,
                            {k: jnp.asarray(v, jnp.float32) for k, v in (hp or {}).items()},

@@ -1,11 +1,13 @@
 """What a run trains, in which order: its hierarchy and the plan of its levels."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 from smjax.options.hierarchy import Hierarchy
 from smjax.policy.hierarchies import (DECLARED_PREFIX, FLAT_SUFFIX, PRIMITIVES_ONLY,
                                       hierarchy_named)
+from smjax.train import distributed as dist
 from smjax.train.config import ConfigError, TrainConfig
 
 
@@ -15,6 +17,36 @@ class LevelPlan:
     option: int      # its option id
     start: int       # option at the bottom of the stack at each reset
     level: int       # the paper's level number
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """A run resolved before anything is built from it: its effective config (the root
+    threshold lowered where the task's best success demands it, recorded in
+    ``cfg.levels``), its hierarchy and that hierarchy's name, and the levels it trains in
+    order. Everything the run builds reads ``cfg`` from here."""
+
+    cfg: TrainConfig
+    hierarchy_name: str
+    hierarchy: Hierarchy
+    plans: tuple[LevelPlan, ...]
+
+
+def resolve_run(env, cfg: TrainConfig, given: Hierarchy | None = None) -> RunPlan:
+    """The one resolution of a run's config against its environment: the hierarchy
+    (``resolve_hierarchy``), the root's reachable threshold (``reachable_root_threshold``;
+    a warning says where it is lowered), the plan of levels, and a check that
+    ``cfg.levels`` names only templates the run trains."""
+    name, hierarchy = resolve_hierarchy(env, cfg, given)
+    effective = reachable_root_threshold(cfg, hierarchy)
+    if effective is not cfg and dist.is_writer():
+        warnings.warn(f"{env.name}: the best task success is {hierarchy.success_ceiling:g}, so "
+                      f"the root level ends at {effective.for_level(hierarchy.task).threshold:g} "
+                      f"(ceiling_fraction {cfg.ceiling_fraction:g} of it), not "
+                      f"{cfg.for_level(hierarchy.task).threshold:g}", stacklevel=4)
+    plans = tuple(plan_levels(hierarchy, effective.method))
+    effective.check_level_names([p.name for p in plans])
+    return RunPlan(effective, name, hierarchy, plans)
 
 
 def finetune_order(hierarchy: Hierarchy, cfg: TrainConfig) -> list[LevelPlan]:

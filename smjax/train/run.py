@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import sys
 import warnings
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
@@ -12,8 +11,7 @@ from smjax.core.registry import make
 from smjax.core.timeline import TIMELINE
 from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
-from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_differences,
-                                 resolve_config)
+from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig, config_differences
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.hooks import CHECKPOINT_FORMAT
@@ -21,8 +19,7 @@ from smjax.train.loop import HierarchyTrainer, NonFiniteError
 from smjax.train.program_cache import cacheable_identity
 from smjax.policy.artifact import policy_meta, write_policy
 from smjax.policy.hierarchies import declared_identity
-from smjax.train.plans import (check_joint_learner, plan_levels, reachable_root_threshold,
-                               resolve_hierarchy, stage_count)
+from smjax.train.plans import check_joint_learner, resolve_run, stage_count
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.restorable import check_restorable
@@ -69,6 +66,12 @@ def check_resumable(out_dir, identity: dict, step: str | None = None) -> bool:
     info = ckpt.shared_meta(out_dir, step)
     if info is None:
         return False
+    _refuse_another_run(out_dir, info, identity)
+    return True
+
+
+def _refuse_another_run(out_dir, info: dict, identity: dict) -> None:
+    """Refuse the checkpoint ``info`` (``ckpt.shared_meta``) where it is not of this run."""
     # a config field added since the checkpoint was written takes its default there (a new
     # field's default keeps the behaviour of the versions before it), or, where the default
     # changed that behaviour, the value the older versions ran with (``LEGACY_VALUES``)
@@ -79,7 +82,6 @@ def check_resumable(out_dir, identity: dict, step: str | None = None) -> bool:
     if diff:
         details = ", ".join(f"{k}: checkpoint {saved.get(k)!r} vs now {identity.get(k)!r}" for k in diff)
         raise ConfigError(f"cannot resume {out_dir}: the run differs in {details}")
-    return True
 
 
 def _claim_out_dir(out_dir, resume: bool, overwrite: bool) -> DirLock | None:
@@ -141,8 +143,6 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
             raise ConfigError(f"hierarchy {hierarchy!r} contradicts the config's hierarchy "
                               f"{cfg.hierarchy!r}; give one of them")
         cfg, hierarchy = cfg.replace(hierarchy=hierarchy), None
-    cfg.validate()
-    cfg = resolve_config(cfg)
     env_overrides = dict(env_overrides or {})
     if sweep is not None:  # a bad sweep is refused before anything is locked or compiled
         from smjax.agents import make_agent  # (imported late: tests replace it)
@@ -179,23 +179,15 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
             env, env_params = make(task, **env_overrides)
         else:
             env, env_params = task
+        resolved = resolve_run(env, cfg, given)
+        cfg, hierarchy, plans = resolved.cfg, resolved.hierarchy, list(resolved.plans)
         agent = make_learner(env, env_params, cfg)
-        hierarchy_name, hierarchy = resolve_hierarchy(env, cfg, given)
-    reachable = reachable_root_threshold(cfg, hierarchy)
-    if reachable is not cfg and progress and dist.is_writer():
-        print(f"{env.name}: the best task success is {hierarchy.success_ceiling:g}, so the root "
-              f"level ends at {reachable.levels[hierarchy.task]['threshold']:g} (ceiling_fraction "
-              f"{cfg.ceiling_fraction:g} of it), not {cfg.for_level(hierarchy.task).threshold:g}",
-              file=sys.stderr)
-    cfg = reachable
     identity = run_identity(env.name, cfg, seeds, env_overrides)
     if given is not None:  # its shape must match on resume
         identity["hierarchy_declared"] = declared_identity(given)
     if sweep is not None:  # a checkpoint of a sweep resumes only that sweep
         identity["sweep"] = sweep
     _check_checkpoint(out_dir, identity, resume, resume_from)
-    plans = plan_levels(hierarchy, cfg.method)
-    cfg.check_level_names([p.name for p in plans])
     check_joint_learner(hierarchy, cfg, agent)
     slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
                              else (seeds, None, None))
@@ -218,9 +210,9 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
             trainer.restore(resume_from, checked)
     raw = _train(trainer, env, env_params, out_dir)
     raw["eval_keys"] = final_evaluation_keys(trainer.arrays.keys)
-    extra = {"hierarchy_used": hierarchy_name, "env_overrides": env_overrides,
+    extra = {"hierarchy_used": resolved.hierarchy_name, "env_overrides": env_overrides,
              "success_unbounded": not engine.root_has_threshold}
-    policy = _policy_meta(task, engine, hierarchy_name, given, env_overrides)
+    policy = _policy_meta(task, engine, resolved.hierarchy_name, given, env_overrides)
     try:
         return _results(env.name, cfg, seeds, raw, extra, outputs, policy, points,
                         len(slot_seeds))
@@ -241,7 +233,7 @@ def _check_checkpoint(out_dir, identity: dict, resume: bool, resume_from: str | 
     if resume:
         if existing is None:
             raise FileNotFoundError(f"nothing to resume: no checkpoint in {ckpt.checkpoint_dir(out_dir)}")
-        check_resumable(out_dir, identity, resume_from)
+        _refuse_another_run(out_dir, existing, identity)
     elif existing is not None:  # (prepare_out_dir refuses this first; kept for safety)
         raise FileExistsError(
             f"{out_dir} already holds a checkpointed run; pass resume (--resume) to continue it "
