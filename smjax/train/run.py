@@ -50,14 +50,14 @@ def run_identity(task_name: str, cfg: TrainConfig, seeds: list[int], env_overrid
     return json.loads(json.dumps(identity))
 
 
-# new config fields whose default is not what the versions before them did: a checkpoint
-# without the field ran as this says (a resume at the new default is refused, by name)
+# config fields whose default differs from the value a checkpoint without the field ran
+# with: such a checkpoint resumes with this value (a resume at the default is refused, by name)
 LEGACY_VALUES = {"finetune_continue_episodes": False, "finetune_mode": "turns",
                  "finetune_plateau_episodes": 0}
 
 
 # evaluation-only settings: a resume of a trained run (every stage done) may change them,
-# e.g. to write the results that an evaluation of too many ticks could not
+# e.g. fewer ticks, where an evaluation with the saved ones cannot finish
 EVAL_SETTINGS = ("eval_envs", "eval_max_ticks")
 
 
@@ -72,11 +72,11 @@ def check_resumable(out_dir, identity: dict, step: str | None = None) -> bool:
 
 def _refuse_another_run(out_dir, info: dict, identity: dict) -> None:
     """Refuse the checkpoint ``info`` (``ckpt.shared_meta``) where it is not of this run."""
-    # a config field added since the checkpoint was written takes its default there (a new
-    # field's default keeps the behaviour of the versions before it), or, where the default
-    # changed that behaviour, the value the older versions ran with (``LEGACY_VALUES``)
+    # a config field the checkpoint lacks takes its default, which computes what the
+    # checkpoint's run computed, or, where it does not, the value that run used
+    # (``LEGACY_VALUES``)
     saved = TrainConfig().to_dict() | LEGACY_VALUES | info["meta"]["run"]
-    # (checkpoints of older versions recorded RUN_SETTINGS in the identity too)
+    # (a checkpoint's identity may hold RUN_SETTINGS too: they never count as a difference)
     free = RUN_SETTINGS + (EVAL_SETTINGS if info["meta"].get("trained") else ())
     diff = [k for k in config_differences(saved, identity) if k not in free]
     if diff:
@@ -109,7 +109,7 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
 
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
-    for environments you define yourself. Returns the results dict (docs/guide.md section 5);
+    for environments you define yourself. Returns the results dict (docs/guide.md, "Results format");
     with ``out_dir`` also writes results.json, curves.csv, the saved policy
     (``policy/``, loaded by ``smjax.load_policy``) and checkpoints there, then calls
     ``after_results(out_dir)`` (a sweep: with each point's directory), e.g.
