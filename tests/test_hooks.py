@@ -87,3 +87,74 @@ def test_stage_end_checkpoints_are_coalesced_but_the_first_and_last_are_written(
     # a gap longer than the run: the first stage end and the last are written, nothing between
     few, _ = _writes(tmp_path / "few", monkeypatch, 1e9)
     assert few == [every[0], every[-1]]
+
+
+class _FakeWandbRun:
+    def __init__(self, **kwargs):
+        self.kwargs, self.rows, self.axes, self.finished = kwargs, [], {}, False
+
+    def define_metric(self, name, step_metric):
+        self.axes[name] = step_metric
+
+    def log(self, row):
+        self.rows.append(dict(row))
+
+    def finish(self):
+        self.finished = True
+
+
+def test_a_callers_hooks_run_beside_the_built_in_ones_and_wandb_gets_every_scalar(
+        tmp_path, monkeypatch):
+    # W&B's own client is an optional extra: a stand-in module records what the hook
+    # hands it (the real one, offline, in the test below where it is installed)
+    import sys
+    import types
+
+    from smjax.train.run import run
+    from smjax.train.wandb_hook import WandbHook
+
+    runs = []
+    fake = types.SimpleNamespace(init=lambda **kw: runs.append(_FakeWandbRun(**kw)) or runs[-1])
+    monkeypatch.setitem(sys.modules, "wandb", fake)
+    recorder = Recorder()
+    cfg = SMALL.replace(checkpoint_every=1e9)
+    raw = run(make_keydoor(), cfg, [0], tmp_path / "out", progress=False,
+              hooks=[recorder, WandbHook(project="p", mode="offline")])
+    assert recorder.calls[0] == "start" and recorder.calls[-1] == "end"
+    assert (tmp_path / "out" / "checkpoints").is_dir()  # the built-in hooks ran too
+    (wb,) = runs
+    assert wb.finished and wb.kwargs["project"] == "p" and wb.kwargs["mode"] == "offline"
+    assert wb.kwargs["config"] == {k: raw["config"][k] for k in wb.kwargs["config"]}
+    # every scalar of every chunk, charted against its own env step, then the chunk's row
+    expected = []
+    for report in recorder.reports:
+        expected += [{s.name: s.value, f"{s.name}/env_step": s.step} for s in report.scalars]
+        expected.append({"chunk": report.chunk})
+    assert [{k: v for k, v in row.items() if k != "env_steps_per_second"}
+            for row in wb.rows] == expected
+    assert all(wb.axes[name] == f"{name}/env_step" for name in wb.axes) and wb.axes
+
+
+def test_wandb_hook_writes_an_offline_run(tmp_path, monkeypatch):
+    import pytest
+
+    pytest.importorskip("wandb")
+    from smjax.train.wandb_hook import WandbHook
+
+    monkeypatch.setenv("WANDB_MODE", "offline")
+    monkeypatch.setenv("WANDB_SILENT", "true")
+    trainer = _trainer([WandbHook(project="smjax-test", dir=str(tmp_path))], seeds=(0,))
+    trainer.run()
+    assert list(tmp_path.rglob("*.wandb"))
+
+
+def test_wandb_hook_without_wandb_says_how_to_install_it(monkeypatch):
+    import sys
+
+    import pytest
+
+    from smjax.train.wandb_hook import WandbHook
+
+    monkeypatch.setitem(sys.modules, "wandb", None)  # import wandb raises ImportError
+    with pytest.raises(ImportError, match=r"pip install 'smjax\[wandb\]'"):
+        WandbHook()

@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 import warnings
 from pathlib import Path
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable, NamedTuple, Sequence
 
 from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
@@ -15,7 +15,8 @@ from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig, config_di
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.hooks import CHECKPOINT_FORMAT
-from smjax.train.loop import HierarchyTrainer, NonFiniteError
+from smjax.train.hooks import Hook
+from smjax.train.loop import HierarchyTrainer, NonFiniteError, default_hooks
 from smjax.train.program_cache import cacheable_identity
 from smjax.policy.artifact import policy_meta, write_policy
 from smjax.policy.hierarchies import declared_identity
@@ -105,7 +106,8 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
         env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
         overwrite: bool = False, sweep: dict | None = None,
         hierarchy: Hierarchy | str | None = None, resume_from: str | None = None,
-        after_results: Callable[[Path], Any] | None = None) -> dict:
+        after_results: Callable[[Path], Any] | None = None,
+        hooks: Sequence[Hook] = ()) -> dict:
     """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
 
     ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
@@ -134,6 +136,10 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
 
     ``resume_from`` (with ``resume``): a checkpoint step to resume instead of the latest
     (``"step-30"``), e.g. the previous good one where the latest is corrupt.
+
+    ``hooks``: side jobs of training (:class:`smjax.train.hooks.Hook`: ``start``, ``chunk``
+    with each chunk's ``ChunkReport``, ``end``), run after the built-in ones (progress bar,
+    TensorBoard, checkpoints), e.g. ``smjax.train.wandb_hook.WandbHook``.
     """
     enable_compilation_cache()  # a second run of the same programs skips compiling
     TIMELINE.listen_to_jax()
@@ -155,8 +161,8 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     with TIMELINE.span("output directory check and lock"):
         lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
     try:
-        return _run_locked(task, cfg, seeds, Outputs(out_dir, after_results), env_overrides,
-                           progress, resume, sweep, hierarchy, resume_from)
+        return _run_locked(task, cfg, seeds, Outputs(out_dir, after_results, tuple(hooks)),
+                           env_overrides, progress, resume, sweep, hierarchy, resume_from)
     finally:
         if lock is not None:
             lock.release()
@@ -167,6 +173,7 @@ class Outputs(NamedTuple):
 
     out_dir: str | Path | None
     after_results: Callable[[Path], Any] | None = None
+    hooks: tuple[Hook, ...] = ()  # the caller's, after the built-in ones
 
 
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
@@ -200,8 +207,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
         engine = Engine(env, env_params, hierarchy, agent, cfg)
         engine.program_identity = cacheable_identity(
             task, given, identity | {"task_name": task, "config": cfg.to_dict()})
-        trainer = HierarchyTrainer(engine, plans, slot_seeds, out_dir=out_dir,
-                                   progress=progress, run_meta=identity, hp=hp, gamma=gamma)
+        hooks = default_hooks(cfg, out_dir, progress, identity) + list(outputs.hooks)
+        trainer = HierarchyTrainer(engine, plans, slot_seeds, hp=hp, gamma=gamma, hooks=hooks)
     if not engine.root_has_threshold and dist.is_writer():
         warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(hierarchy.task).threshold),
                       stacklevel=3)
