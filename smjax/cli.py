@@ -96,6 +96,24 @@ def _add_train(sub):
                         "actor-critic: agent.ent_coef, vf_coef")
     p.add_argument("--hierarchy", default=None, help="hierarchy name (see `smjax list --hierarchies`)")
     p.add_argument("--num-envs", type=int, default=None, help="parallel environments per seed")
+    _add_train_budgets(p)
+    p.add_argument("--tensorboard", action="store_true", help="also write TensorBoard event files to OUT/tensorboard")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the run already in --out (its results, curves and checkpoints)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars; print only the summary line")
+    p.add_argument("--profile", action="store_true",
+                   help="print where the command's time went, from process start to the last file "
+                        "written (imports, set-up, tracing and compiling, chunks, gates, evaluation, "
+                        "checkpoints, results), and write it to OUT/profile.json")
+    _add_debug(p)
+    add_distributed(p)
+    # what ``cmd_train`` fills in for the error messages of ``_run_command``: the output
+    # directory (the resume command after an interruption), the batch (out of memory)
+    p.set_defaults(run_out=None, run_batch=None)
+
+
+def _add_train_budgets(p):
+    """``smjax train``'s level and fine-tuning flags."""
     p.add_argument("--threshold", type=float, default=None,
                    help="success threshold per level (0, 1]; a level ends when its running success "
                         "reaches it and the frozen policy passes it on fresh episodes (--set "
@@ -114,19 +132,6 @@ def _add_train(sub):
     p.add_argument("--finetune-episodes", type=int, default=None, metavar="N",
                    help="fine-tuning's episode budget per seed (default 20000)")
     p.add_argument("--fixed-map", action="store_true", help="Craft: one fixed map per run (the paper's setting)")
-    p.add_argument("--tensorboard", action="store_true", help="also write TensorBoard event files to OUT/tensorboard")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace the run already in --out (its results, curves and checkpoints)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars; print only the summary line")
-    p.add_argument("--profile", action="store_true",
-                   help="print where the command's time went, from process start to the last file "
-                        "written (imports, set-up, tracing and compiling, chunks, gates, evaluation, "
-                        "checkpoints, results), and write it to OUT/profile.json")
-    _add_debug(p)
-    add_distributed(p)
-    # what ``cmd_train`` fills in for the error messages of ``_run_command``: the output
-    # directory (the resume command after an interruption), the batch (out of memory)
-    p.set_defaults(run_out=None, run_batch=None)
 
 
 def _add_bench(sub):
