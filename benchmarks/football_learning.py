@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{difficulty:6s} {method:8s} goal difference {m:+.2f} +- {s:.2f}  "
                   f"steps {statistics.mean(rec['env_steps']) / 1e6:.2f}M  wall {rec['wall_seconds']:.0f}s "
                   f"(compile {rec['compile_seconds']:.0f}s)", flush=True)
-            # rewrite after every run so a cut-off session keeps what finished
+            # rewrite after every run so an interrupted sweep keeps what finished
             (out / "football_learning.json").write_text(json.dumps(records, indent=2) + "\n")
             (out / "football_learning.md").write_text(table(records))
     print(table(records))
