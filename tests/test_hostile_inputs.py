@@ -214,8 +214,8 @@ def _free_port() -> int:
 
 
 def test_an_unreachable_coordinator_ends_in_one_line_within_its_timeout(tmp_path):
-    """Issue #18 item 9: JAX waited 300 s, then aborted with a C++ stack trace. Now each
-    way of not reaching the run ends with exit code 2 and one line, bounded by
+    """Left to JAX, an unreachable coordinator waits minutes and then aborts with a C++
+    stack trace. Each way of not reaching the run ends with exit code 2 and one line, bounded by
     --coordinator-timeout: process 0 whose peers never join, a process whose coordinator
     does not answer, and a coordinator port already taken on process 0's host."""
     busy = socket.socket()
