@@ -78,7 +78,8 @@ class HierarchyTrainer:
         # after the levels, a seed fine-tunes (one stage more) unless it is off
         self.finetune = FinetuneStage(engine, cfg, plans, self.slots) if cfg.finetune_on else None
         self.stages: list[Stage] = [self.levels] + ([self.finetune] if self.finetune else [])
-        keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32))
+        keys = self.slots.committed(
+            jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32)))
         keys, k_init, k_reset = split_seeds(keys, 3)
         learner = self.slots.init_learner(engine, k_init)
         tuning_hp = finetune_hp(cfg, learner.hp)  # refused even where fine-tuning is off

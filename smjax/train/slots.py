@@ -42,12 +42,23 @@ class Slots:
         return learner
 
     def set(self, arrays: TrainArrays) -> None:
-        """New device state, put on the mesh (seed axis, then environment axis)."""
-        self.arrays = arrays
+        """New device state, put on the mesh (seed axis, then environment axis), or
+        committed to the one device."""
         if self.mesh is not None:
             shardings = seed_sharding(self.mesh, arrays).replace(
                 state=state_shardings(self.mesh, arrays.state))
             self.arrays = dist.place(arrays, shardings)
+        else:
+            self.arrays = self.committed(arrays)
+
+    def committed(self, tree):
+        """``tree`` committed to the device the state lives on (with a mesh: placed on
+        it). A compiled chunk returns committed arrays, and jit compiles a program again
+        for committed arguments where it first saw uncommitted ones: the run's keys start
+        committed, so every small program (resets, inits, seed selections) compiles once."""
+        if self.mesh is not None:
+            return self.small(tree)
+        return jax.device_put(tree, jax.devices()[0])
 
     def local(self) -> TrainArrays:
         """The device state as arrays this process holds whole (for host-side changes)."""
