@@ -52,12 +52,13 @@ class Slots:
             self.arrays = self.committed(arrays)
 
     def committed(self, tree):
-        """``tree`` committed to the device the state lives on (with a mesh: placed on
-        it). A compiled chunk returns committed arrays, and jit compiles a program again
-        for committed arguments where it first saw uncommitted ones: the run's keys start
-        committed, so every small program (resets, inits, seed selections) compiles once."""
+        """``tree`` committed to the one device the state lives on. A compiled chunk
+        returns committed arrays, and jit compiles a program again for committed arguments
+        where it first saw uncommitted ones: the run's keys start committed, so every small
+        program (resets, inits, seed selections) compiles once. With a mesh, host-side
+        changes work on local copies (``local``) and ``set`` places the result: unchanged."""
         if self.mesh is not None:
-            return self.small(tree)
+            return tree
         return jax.device_put(tree, jax.devices()[0])
 
     def local(self) -> TrainArrays:
