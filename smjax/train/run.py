@@ -14,8 +14,7 @@ from smjax.train import distributed as dist
 from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig, config_differences
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
-from smjax.train.hooks import CHECKPOINT_FORMAT
-from smjax.train.hooks import Hook
+from smjax.train.hooks import CHECKPOINT_FORMAT, Hook
 from smjax.train.loop import HierarchyTrainer, NonFiniteError, default_hooks
 from smjax.train.program_cache import cacheable_identity
 from smjax.policy.artifact import policy_meta, write_policy

@@ -7,7 +7,8 @@
 Each chunk logs the stages' scalars (the names TensorBoard gets, e.g.
 ``seed_0/level_1_get_wood/running_success``), each charted against its own env step
 (``NAME/env_step``: seeds and levels count env steps apart), then the chunk's number and
-the run's env steps per second. With several processes only process 0 logs. ``WANDB_MODE=offline`` keeps everything on disk.
+the run's env steps per second. With several processes only process 0 logs.
+``WANDB_MODE=offline`` keeps everything on disk.
 """
 from __future__ import annotations
 
@@ -35,8 +36,9 @@ class WandbHook(Hook):
 
     def start(self, trainer) -> None:
         if self.run is None and dist.is_writer():
-            config = self.init_kwargs.pop("config", None) or trainer.cfg.to_dict()
-            self.run = self.wandb.init(config=config, **self.init_kwargs)
+            kwargs = dict(self.init_kwargs)  # a hook used for a second run keeps its own
+            config = kwargs.pop("config", None) or trainer.cfg.to_dict()
+            self.run = self.wandb.init(config=config, **kwargs)
 
     def chunk(self, trainer, report: ChunkReport) -> None:
         if self.run is None:
