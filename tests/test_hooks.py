@@ -29,10 +29,10 @@ class Recorder(Hook):
         self.calls.append("end")
 
 
-def _trainer(hooks, seeds=(0, 1)):
+def _trainer(hooks, seeds=(0, 1), cfg=SMALL):
     env, params = make_keydoor()
     h = env.hierarchies()["paper"]
-    return HierarchyTrainer(Engine(env, params, h, make_agent("ppo"), SMALL),
+    return HierarchyTrainer(Engine(env, params, h, make_agent("ppo"), cfg),
                             plan_levels(h, "top-down"), list(seeds), hooks=hooks)
 
 
@@ -70,12 +70,7 @@ def _writes(tmp_path, monkeypatch, gap_writes: float) -> tuple[list, int]:
         written.append(trainer.state.chunks), save(hook, trainer)))
     recorder = Recorder()
     cfg = SMALL.replace(checkpoint_every=1e9)
-    env, params = make_keydoor()
-    h = env.hierarchies()["paper"]
-    trainer = HierarchyTrainer(
-        Engine(env, params, h, make_agent("ppo"), cfg), plan_levels(h, "top-down"), [0, 1],
-        hooks=[recorder, CheckpointHook(tmp_path, cfg, {})])
-    trainer.run()
+    _trainer([recorder, CheckpointHook(tmp_path, cfg, {})], cfg=cfg).run()
     return written, sum(r.stage_ended for r in recorder.reports)
 
 
