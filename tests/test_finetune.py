@@ -91,9 +91,9 @@ def test_results_keep_the_contract(far_teleport_run):
 
 
 def test_finetune_off_and_bad_values():
-    assert TrainConfig().finetune_on and not TrainConfig(method="flat").finetune_on
-    assert TrainConfig(method="flat", finetune="on").finetune_on
-    assert not TrainConfig(finetune="off").finetune_on
+    assert TrainConfig().fine_tuning.on and not TrainConfig(method="flat").fine_tuning.on
+    assert TrainConfig(method="flat", finetune="on").fine_tuning.on
+    assert not TrainConfig(finetune="off").fine_tuning.on
     for field, value in (("finetune", "maybe"), ("finetune_threshold", 0.0),
                          ("finetune_option_threshold", 1.5), ("finetune_max_episodes", 0),
                          ("finetune_turn_episodes", -3), ("finetune_max_rest", -1),

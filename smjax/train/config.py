@@ -12,6 +12,7 @@ from smjax.train.config_checks import (  # noqa: F401 - re-exported: the config'
     ALGOS, FINETUNE_CHOICES, FINETUNE_MODES, FROZEN_POLICIES, LEVEL_FIELDS, METHODS, ConfigError,
     check_fields, field_values, level_configs, normalize_agent, parsed_fields,
 )
+from smjax.train.sections import Evaluation, FineTuning, SectionError, flatten_sections
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,11 @@ class LevelSettings:
 @dataclass(frozen=True)
 class TrainConfig:
     """Every knob of a training run (docs/guide.md, "TrainConfig reference").
+
+    The parts of training read it in typed sections, resolved once when it is made:
+    ``fine_tuning`` (``finetune*`` fields), ``evaluation`` (``gate*``, ``eval_*``) and
+    ``for_level(name)``; files and ``--set`` may name fields by section
+    (``fine_tuning.threshold``: :mod:`smjax.train.sections`).
 
     Attributes:
       method: top-down (the paper's Algorithms 1-2), bottom-up (sub-skills first, from
@@ -159,11 +165,17 @@ class TrainConfig:
         object.__setattr__(self, "_level_settings", (LevelSettings.of(self), levels))
         # the learner's overrides as JSON stores them, so a resumed run compares equal
         object.__setattr__(self, "agent", normalize_agent(self.algo, self.agent))
+        object.__setattr__(self, "_sections", (FineTuning.of(self), Evaluation.of(self)))
 
     @property
-    def finetune_on(self) -> bool:
-        """Whether the fine-tuning phase runs ("auto": for top-down)."""
-        return self.finetune == "on" or (self.finetune == "auto" and self.method == "top-down")
+    def fine_tuning(self) -> FineTuning:
+        """The fine-tuning phase's section (``finetune*`` fields; ``on`` resolved)."""
+        return self._sections[0]
+
+    @property
+    def evaluation(self) -> Evaluation:
+        """The gate's and the final evaluation's section."""
+        return self._sections[1]
 
     @property
     def pool_size(self) -> int:
@@ -202,6 +214,7 @@ class TrainConfig:
         False, ``16.0`` is 16, ``2.5`` for an integer field and NaN are refused)."""
         if not isinstance(data, dict):
             raise ConfigError(f"a config must be a mapping of fields, got {type(data).__name__}")
+        data = flat_fields(data)
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names, key=repr)  # key=repr: keys may be of any type
         if unknown:
@@ -237,7 +250,7 @@ def resolve_config(base: TrainConfig | None = None, *, saved_run: dict | None = 
     data = {k: v for k, v in (saved_run or {}).items() if k in names}
     if file is not None:
         data.update(read_config_file(file))  # only the fields the file sets
-    data.update(sets or {})
+    data.update(flat_fields(sets or {}))
     if agent:
         if "gamma" in agent:
             raise ConfigError(f"--agent gamma={agent['gamma']} would be ignored: the discount is "
@@ -268,10 +281,19 @@ def read_config_file(path: str | Path) -> dict:
         raise ConfigError(f"config file {path} must hold a mapping of fields, got "
                           f"{type(data).__name__}")
     try:
+        data = flat_fields(data)
         TrainConfig.from_dict(data)
     except (ConfigError, TypeError, ValueError) as err:
         raise ConfigError(f"config file {path}: {err}") from None
     return parsed_fields(TrainConfig, data)
+
+
+def flat_fields(data: dict) -> dict:
+    """``data`` with fields named by section (``fine_tuning.threshold``) as flat fields."""
+    try:
+        return flatten_sections(data)
+    except SectionError as err:
+        raise ConfigError(str(err)) from None
 
 
 def config_differences(a: dict, b: dict) -> list[str]:

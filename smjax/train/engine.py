@@ -302,14 +302,14 @@ class Engine:
         decide = early_stop_bounds([threshold if bounded else None] * S)
         per_seed = place((jnp.full((S,), NO_OPTION, jnp.int32), jnp.zeros((S,), jnp.int32),
                           ~jnp.asarray(due, bool), decide, self._seed_temperatures(policy, S)))
-        teleport, max_ticks = place((jnp.asarray(False), jnp.asarray(self.cfg.eval_max_ticks)))
+        teleport, max_ticks = place((jnp.asarray(False), jnp.asarray(self.cfg.evaluation.eval_max_ticks)))
         learner, start, skip, decide, temperatures = per_seed
         # the program (shared with the gate) takes learner params; with none, option 0's
         # bank entry has their shapes (the bank is built from the learners' params)
         params = self._bank_entry0(bank) if learner_state is None else learner_state.params
         args = (keys, params, bank, learned, learner, start, teleport, temperatures, max_ticks,
                 skip, decide)
-        return self._run_episodes(args, self.cfg.eval_envs)
+        return self._run_episodes(args, self.cfg.evaluation.eval_envs)
 
     def gate(self, keys, state: SeedState, bank, learned, learners: list[int],
              starts: list[int], due: list[bool], thresholds: list[float],
@@ -323,8 +323,8 @@ class Engine:
         per_seed = place((jnp.asarray(learners, jnp.int32), jnp.asarray(starts, jnp.int32),
                           ~jnp.asarray(due, bool), decide,
                           self._seed_temperatures(self.frozen_policy, len(learners))))
-        teleport, max_ticks = place((jnp.asarray(True), jnp.asarray(self.cfg.gate_max_ticks)))
+        teleport, max_ticks = place((jnp.asarray(True), jnp.asarray(self.cfg.evaluation.gate_max_ticks)))
         learner, start, skip, decide, temperatures = per_seed
         args = (keys, state.learner.params, bank, learned, learner, start, teleport, temperatures,
                 max_ticks, skip, decide)
-        return self._run_episodes(args, self.cfg.gate_envs)
+        return self._run_episodes(args, self.cfg.evaluation.gate_envs)

@@ -76,7 +76,7 @@ class FinetuneStage:
         self.index = len(plans)
         self.order = finetune_order(engine.h, cfg)  # the turns' options, round and round
         check_joint_learner(engine.h, cfg, engine.agent)
-        self.joint = cfg.finetune_mode == "joint"
+        self.joint = cfg.fine_tuning.mode == "joint"
         # the level number fine-tuning's curve is recorded under (after the last level)
         self.level = max(p.level for p in plans) + 1
         self.candidates: list[int] = []  # seeds whose task success reached the threshold
@@ -88,22 +88,19 @@ class FinetuneStage:
         """The option whose turn it is (joint: the root's, the first turn's)."""
         return self.order[st.finetune[s].turn % len(self.order)]
 
-    def side_cost(self) -> float:
-        return self.cfg.finetune_side_cost_weight if self.cfg.finetune_side_cost else 0.0
-
     def controls(self, st: TrainerState, s: int) -> SeedControls:
         """A turn's chunk: the learned hierarchy alone (no teleports), whole episodes."""
         plan = self.plan(st, s)
         level = self.cfg.for_level(plan.name)
         return SeedControls(
             option=plan.option, start=plan.start, teleport=False, keep_episodes=True,
-            side_cost=self.side_cost(), gamma=self.slots.level_gamma(plan.name, s),
+            side_cost=self.cfg.fine_tuning.side_cost, gamma=self.slots.level_gamma(plan.name, s),
             window=level.success_window, task_window=self.cfg.success_window,
             threshold=level.threshold, joint=self.joint)
 
     def option_gammas(self, s: int) -> list[float]:
         """Joint fine-tuning's discount per option for slot ``s``: the one the option's
-        level trained it at (``levels[name]["gamma"]``), else the slot's: each option's
+        level trained it at, else the slot's (``Slots.level_gamma``): each option's
         values keep the horizon they were learned for (``smjax.options.joint``)."""
         level = {p.option: p.name for p in self.order}
         return [self.slots.level_gamma(level.get(o), s)
@@ -113,7 +110,7 @@ class FinetuneStage:
         """Joint fine-tuning's per-seed inputs for every seed: the side cost's weight, each
         option's discount, the learner's and the task's window sizes."""
         S, window = len(self.slots), self.cfg.success_window
-        return ([self.side_cost()] * S, [self.option_gammas(s) for s in range(S)],
+        return ([self.cfg.fine_tuning.side_cost] * S, [self.option_gammas(s) for s in range(S)],
                 [[window, window]] * S)
 
     def status(self, st: TrainerState, s: int) -> SeedStatus:
@@ -147,13 +144,13 @@ class FinetuneStage:
         its teleport-free task success over the window reached the threshold."""
         cfg, rec, seed, task = self.cfg, st.finetune[s], self.slots.seeds[s], out.windows[1]
         for success, episodes in zip(out.stats.task_success[s], out.stats.task_episodes[s]):
-            rec.add_to_block(success, episodes, cfg.finetune_plateau_episodes)
+            rec.add_to_block(success, episodes, cfg.fine_tuning.plateau_episodes)
         rows = rec.count(out.stats.env_episodes[s], task[0][s], task[1][s], steps_per_update)
         for episodes, env_steps, running in rows:
             st.curves.append([seed, self.level, "finetune", episodes, env_steps, running, s])
             if running is not None:
                 scalars.append(Scalar(f"seed_{seed}/finetune/task_success", running, env_steps))
-        return (rec.task_running is not None and rec.task_running >= cfg.finetune_threshold
+        return (rec.task_running is not None and rec.task_running >= cfg.fine_tuning.threshold
                 and self.engine.root_has_threshold)  # a raw return is no success rate
 
     def joint_scalars(self, st: TrainerState, seeds: list[int], out: ChunkOut) -> list[Scalar]:
@@ -173,7 +170,7 @@ class FinetuneStage:
         return scalars
 
     def spent(self, st: TrainerState, s: int) -> bool:
-        return st.finetune[s].episodes >= self.cfg.finetune_max_episodes
+        return st.finetune[s].episodes >= self.cfg.fine_tuning.max_episodes
 
     def decide(self, st: TrainerState, seeds: list[int], controls: list[SeedControls],
                ends: Ends) -> list[Scalar]:
@@ -183,15 +180,15 @@ class FinetuneStage:
         cfg, passed = self.cfg, self.gate(st, controls)
         for s in seeds:
             running, rec = st.level[s].running, st.finetune[s]
-            plateau = (cfg.finetune_plateau_episodes > 0
-                       and rec.plateaued(cfg.finetune_plateau_gain))
+            plateau = (cfg.fine_tuning.plateau_episodes > 0
+                       and rec.plateaued(cfg.fine_tuning.plateau_gain))
             if s in passed or self.spent(st, s) or plateau:
                 ends.phases.append(s)
                 rec.reached = s in passed
                 rec.stop = "gate" if s in passed else "plateau" if plateau else "budget"
             elif not self.joint and (
-                    (running is not None and running >= cfg.finetune_option_threshold)
-                    or st.level[s].episodes >= cfg.finetune_turn_episodes):
+                    (running is not None and running >= cfg.fine_tuning.option_threshold)
+                    or st.level[s].episodes >= cfg.fine_tuning.turn_episodes):
                 ends.turns.append(s)
         return []
 
@@ -200,7 +197,7 @@ class FinetuneStage:
         teleport-free gate at ``finetune_threshold`` (every ``gate_interval`` chunks, and
         once more when the budget is spent; all candidates without the gate)."""
         cfg, candidates = self.cfg, self.candidates
-        if not cfg.gate or not candidates:
+        if not cfg.evaluation.gate or not candidates:
             return candidates
         due = [s for s in candidates if st.chunks >= st.finetune[s].gate_next or self.spent(st, s)]
         if not due:
@@ -209,11 +206,11 @@ class FinetuneStage:
         bank, learned = self.candidate_bank(due, [c.option for c in controls])
         result, compile_s = self.engine.evaluate(
             keys, bank, learned, place=self.slots.small,
-            due=[s in due for s in range(len(self.slots))], threshold=cfg.finetune_threshold)
+            due=[s in due for s in range(len(self.slots))], threshold=cfg.fine_tuning.threshold)
         st.compile_seconds += compile_s
         result = dist.gather(result)
         return [s for s in due if st.finetune[s].record_gate(
-            result, s, st.chunks + cfg.gate_interval) >= cfg.finetune_threshold]
+            result, s, st.chunks + cfg.evaluation.gate_interval) >= cfg.fine_tuning.threshold]
 
     def candidate_bank(self, seeds: list[int], options: list[int]):
         """(bank, learned) with these seeds' learners frozen in at their options (joint:
@@ -243,12 +240,12 @@ class FinetuneStage:
         for s in seeds:
             rec = st.finetune[s]
             rec.success_before, rec.baseline = float(result["success"][s]), True
-            if not self.cfg.gate:
+            if not self.cfg.evaluation.gate:
                 continue
             rec.gate_attempts += 1
             rec.gate_env_steps += int(result["env_steps"][s])
             rec.gate_success = rec.success_before
-            if rec.success_before >= self.cfg.finetune_threshold:
+            if rec.success_before >= self.cfg.fine_tuning.threshold:
                 rec.reached, rec.stop, rec.kept = True, "gate", "levels"
                 st.stage[s] += 1  # past the phase: nothing starts for it
 
@@ -289,8 +286,8 @@ class FinetuneStage:
                 st.stage[s] += 1
             else:
                 rec.turn = next_turn(rec.turn, [p.name for p in self.order], rec.turns,
-                                     rec.rested, self.cfg.finetune_option_threshold,
-                                     self.cfg.finetune_max_rest)
+                                     rec.rested, self.cfg.fine_tuning.option_threshold,
+                                     self.cfg.fine_tuning.max_rest)
             st.started[s] = False
 
     def keep_better(self, st: TrainerState, seeds: list[int]) -> None:
@@ -332,7 +329,7 @@ class FinetuneStage:
             fresh = fresh._replace(learner=select_seeds(
                 mask, warm.replace(hp={**warm.hp, **self.hp}), learner))
         go_on = [s for s in seeds
-                 if self.cfg.finetune_continue_episodes and st.finetune[s].turns]
+                 if self.cfg.fine_tuning.continue_episodes and st.finetune[s].turns]
         if go_on:
             carry = select_seeds(self.slots.mask(go_on),
                                  self.engine.hand_over(arrays.state.carry), fresh.carry)

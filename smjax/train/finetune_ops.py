@@ -50,10 +50,10 @@ def store_learned(mask: jax.Array, learned: jax.Array, params, bank):
 
 
 def finetune_hp(cfg: TrainConfig, hp: dict) -> dict:
-    """``cfg.finetune_agent`` as the learner's per-slot hyper-parameter leaves (``hp``: a
+    """``cfg.fine_tuning.agent`` as the learner's per-slot hyper-parameter leaves (``hp``: a
     fresh learner's)."""
-    unknown = sorted(set(cfg.finetune_agent) - set(hp))
+    unknown = sorted(set(cfg.fine_tuning.agent) - set(hp))
     if unknown:
         raise ConfigError(f"config field 'finetune_agent' names {unknown}, which the "
                           f"{cfg.algo} learner does not read per turn; it reads {sorted(hp)}")
-    return {k: jnp.full_like(hp[k], v) for k, v in cfg.finetune_agent.items()}
+    return {k: jnp.full_like(hp[k], v) for k, v in cfg.fine_tuning.agent.items()}

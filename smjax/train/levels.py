@@ -121,7 +121,7 @@ class LevelStage:
         with it, those whose frozen policy passes a gate attempt (tried every
         ``gate_interval`` chunks, and once more when the budget is spent)."""
         candidates = self.candidates
-        if not self.cfg.gate or not candidates:
+        if not self.cfg.evaluation.gate or not candidates:
             return candidates, []
         due = [s for s in candidates
                if st.chunks >= st.level[s].gate_next or self.budget_spent(st, s)]
@@ -140,7 +140,7 @@ class LevelStage:
         passed, scalars = [], []
         for s in due:
             c, level = st.level[s], self.level_cfg(st, s)
-            success = c.record_gate(result, s, st.chunks + self.cfg.gate_interval)
+            success = c.record_gate(result, s, st.chunks + self.cfg.evaluation.gate_interval)
             tag = level_tag(self.slots.seeds[s], self.plan(st, s))
             scalars += [Scalar(f"{tag}/gate_success", success, c.env_steps),
                         Scalar(f"{tag}/gate_uncalled", c.gate_uncalled, c.env_steps)]

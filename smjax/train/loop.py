@@ -62,21 +62,22 @@ class HierarchyTrainer:
 
     def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
                  out_dir=None, progress: bool = True, run_meta: dict | None = None,
-                 hp: dict | None = None, gamma: list[float] | None = None,
+                 hp: dict | None = None, configs: list | None = None,
                  hooks: list[Hook] | None = None):
         """``seeds``: one per slot (a sweep repeats them, once per point); ``hp``: per slot,
-        the learner's sweepable hyper-parameters that differ from its config, ``gamma``:
-        per slot, the discount (a sweep; default ``cfg.gamma``). ``hooks``: the side jobs
+        the learner's sweepable hyper-parameters that differ from its config; ``configs``:
+        per slot, the config its run alone has (a sweep point's; default the engine's).
+        ``hooks``: the side jobs
         (default: ``default_hooks``)."""
         cfg = self.cfg = engine.cfg
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
         S = len(self.seeds)
-        self.slots = Slots(self.seeds, gamma if gamma is not None else [cfg.gamma] * S,
+        self.slots = Slots(self.seeds, configs if configs is not None else [cfg] * S,
                            {k: jnp.asarray(v, jnp.float32) for k, v in (hp or {}).items()},
-                           training_mesh(S, cfg.num_envs), cfg.levels)
+                           training_mesh(S, cfg.num_envs))
         self.levels = LevelStage(engine, cfg, plans, self.slots)
         # after the levels, a seed fine-tunes (one stage more) unless it is off
-        self.finetune = FinetuneStage(engine, cfg, plans, self.slots) if cfg.finetune_on else None
+        self.finetune = FinetuneStage(engine, cfg, plans, self.slots) if cfg.fine_tuning.on else None
         self.stages: list[Stage] = [self.levels] + ([self.finetune] if self.finetune else [])
         keys = self.slots.committed(
             jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32)))

@@ -51,7 +51,7 @@ def resolve_run(env, cfg: TrainConfig, given: Hierarchy | None = None) -> RunPla
 
 def finetune_order(hierarchy: Hierarchy, cfg: TrainConfig) -> list[LevelPlan]:
     """The options fine-tuning trains, in order (none where it is off)."""
-    return plan_levels(hierarchy, "top-down") if cfg.finetune_on else []
+    return plan_levels(hierarchy, "top-down") if cfg.fine_tuning.on else []
 
 
 def stage_count(hierarchy: Hierarchy, plans: list[LevelPlan], cfg: TrainConfig) -> int:
@@ -62,7 +62,7 @@ def stage_count(hierarchy: Hierarchy, plans: list[LevelPlan], cfg: TrainConfig) 
 def check_joint_learner(hierarchy: Hierarchy, cfg: TrainConfig, agent) -> None:
     """Refuse joint fine-tuning of a recurrent policy (its memory is not carried across
     the options that joint fine-tuning trains at once)."""
-    if finetune_order(hierarchy, cfg) and cfg.finetune_mode == "joint" and agent.hidden_size:
+    if finetune_order(hierarchy, cfg) and cfg.fine_tuning.mode == "joint" and agent.hidden_size:
         raise ConfigError("config field 'finetune_mode' = 'joint' does not run a recurrent "
                           "policy (--agent recurrent_size): add --finetune-mode turns "
                           "(finetune_mode: turns)")

@@ -195,8 +195,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
         identity["sweep"] = sweep
     _check_checkpoint(out_dir, identity, resume, resume_from)
     check_joint_learner(hierarchy, cfg, agent)
-    slot_seeds, hp, gamma = (slot_layout(cfg, points, seeds) if points is not None
-                             else (seeds, None, None))
+    slot_seeds, hp, configs = (slot_layout(cfg, points, seeds) if points is not None
+                               else (seeds, None, None))
     # the checkpoint's files and host state, checked before the trainer compiles anything
     checked = (check_restorable(out_dir, resume_from, len(slot_seeds),
                                 stage_count(hierarchy, plans, cfg), CHECKPOINT_FORMAT)
@@ -207,7 +207,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
         engine.program_identity = cacheable_identity(
             task, given, identity | {"task_name": task, "config": cfg.to_dict()})
         hooks = default_hooks(cfg, out_dir, progress, identity) + list(outputs.hooks)
-        trainer = HierarchyTrainer(engine, plans, slot_seeds, hp=hp, gamma=gamma, hooks=hooks)
+        trainer = HierarchyTrainer(engine, plans, slot_seeds, hp=hp, configs=configs,
+                                   hooks=hooks)
     if not engine.root_has_threshold and dist.is_writer():
         warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(hierarchy.task).threshold),
                       stacklevel=3)

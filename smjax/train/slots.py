@@ -1,7 +1,8 @@
 """The run's slots and their device state.
 
 A slot is one seed of one sweep point (without a sweep: one seed). ``Slots`` holds, per
-slot, its seed, discount and swept hyper-parameters, and the device state of all slots
+slot, its seed, its config (its sweep point's) and swept hyper-parameters, and the device
+state of all slots
 (``TrainArrays``) placed on the training mesh; the stages and the driver loop change that
 state through it.
 """
@@ -12,27 +13,29 @@ import jax.numpy as jnp
 
 from smjax.train import distributed as dist
 from smjax.train.seed_arrays import local
+from smjax.train.config import TrainConfig
 from smjax.train.sharding import seed_sharding, state_shardings
 from smjax.train.state import TrainArrays
 
 
 class Slots:
-    """Per slot: ``seeds``, ``gamma`` and ``hp`` (learner hyper-parameter leaves that
-    differ from the config); ``arrays``: every slot's device state on ``mesh`` (None: one
-    device)."""
+    """Per slot: ``seeds``, ``configs`` (the config its run alone would have: its sweep
+    point's) and ``hp`` (learner hyper-parameter leaves that differ from the config);
+    ``arrays``: every slot's device state on ``mesh`` (None: one device)."""
 
-    def __init__(self, seeds: list[int], gamma: list[float], hp: dict, mesh, levels: dict):
-        self.seeds, self.gamma, self.hp, self.mesh = list(seeds), list(gamma), hp, mesh
-        self.level_settings = levels
+    def __init__(self, seeds: list[int], configs: list[TrainConfig], hp: dict, mesh):
+        self.seeds, self.configs, self.hp, self.mesh = list(seeds), list(configs), hp, mesh
         self.arrays: TrainArrays | None = None
 
     def __len__(self) -> int:
         return len(self.seeds)
 
     def level_gamma(self, name: str | None, s: int) -> float:
-        """Level ``name``'s own discount (``levels[name]["gamma"]``), else slot ``s``'s
-        (``cfg.gamma``, or its sweep point's)."""
-        return self.level_settings.get(name, {}).get("gamma", self.gamma[s])
+        """The discount slot ``s`` trains level ``name`` with (None: an option no level
+        trains): its ``LevelSettings.gamma``, the one source of a discount (a level's own,
+        else the config's; a swept gamma is its point's config's, and a sweep refuses
+        gamma where a level sets its own)."""
+        return self.configs[s].for_level(name).gamma
 
     def init_learner(self, engine, keys: jax.Array):
         """Fresh learners per slot, with each slot's swept hyper-parameters."""

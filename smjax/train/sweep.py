@@ -124,12 +124,12 @@ def parse_sweep_flags(items: list[str]) -> dict[str, list[str]]:
 
 def slot_layout(cfg: TrainConfig, points: list[dict], seeds: list[int]) -> tuple:
     """Per slot (point-major): its seed, its learner's swept values (per field) and its
-    discount."""
+    config (its point's: ``point_config``)."""
     slot_seeds = [s for _ in points for s in seeds]
     hp = {key[len(PREFIX):]: [p[key] for p in points for _ in seeds]
           for key in points[0] if key.startswith(PREFIX)}
-    gamma = [point_config(cfg, p).gamma for p in points for _ in seeds]
-    return slot_seeds, hp, gamma
+    configs = [c for c in map(lambda p: point_config(cfg, p), points) for _ in seeds]
+    return slot_seeds, hp, configs
 
 
 def point_config(cfg: TrainConfig, point: dict) -> TrainConfig:
