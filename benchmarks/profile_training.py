@@ -126,9 +126,17 @@ def profile(args) -> dict:
         pair = SuccessWindow.pair(S, cfg.window_slots)
         level["windows"] = (pair["window"], pair["task_window"])
         level["sizes"] = jnp.tile(jnp.asarray([cfg.success_window, 0], jnp.int32), (S, 1))
-    switches = tuple(v for k, v in level.items() if k in takes)
-    record("chunk", lambda st: chunk(st, active, bank, learned, learners, starts, *switches)[1],
-           (state,))
+    if "tick" in takes:  # the per-seed settings as one ChunkControls
+        from smjax.train.engine import ChunkControls
+
+        tick = ChunkControls(learners, starts, level["teleport"], level["continue_episodes"],
+                             level["side_cost"], level["gamma"])
+        rest = tuple(v for k, v in level.items() if k in ("windows", "sizes"))
+        call = lambda st: chunk(st, active, bank, learned, tick, *rest)[1]  # noqa: E731
+    else:
+        switches = tuple(v for k, v in level.items() if k in takes)
+        call = lambda st: chunk(st, active, bank, learned, learners, starts, *switches)[1]  # noqa: E731
+    record("chunk", call, (state,))
 
     def rollout_one(st: SeedState, bank_s, learned_s):
         controls = Controls(learner_id, start, learned_s)

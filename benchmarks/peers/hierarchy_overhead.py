@@ -35,7 +35,7 @@ import _common  # noqa: E402
 def time_engine_chunk(env, params, hierarchy, cfg, learner_name: str, learned_names, seeds, repeats: int) -> dict:
     """Compile and time ``Engine.chunk`` as the trainer calls it (state donated, so chained)."""
     from smjax.agents import make_agent
-    from smjax.train.engine import Engine, SeedState
+    from smjax.train.engine import ChunkControls, Engine, SeedState
 
     engine = Engine(env, params, hierarchy, make_agent(cfg.algo, **cfg.agent), cfg)
     num_seeds = len(seeds)
@@ -52,9 +52,10 @@ def time_engine_chunk(env, params, hierarchy, cfg, learner_name: str, learned_na
     active = jnp.ones((num_seeds,), bool)
     # a level's per-seed switches: teleports on, episodes reset with the learner's option,
     # no side costs, the run's discount (the running-success windows are left out)
-    switches = (jnp.ones((num_seeds,), bool), jnp.zeros((num_seeds,), bool),
-                jnp.zeros((num_seeds,), jnp.float32), jnp.full((num_seeds,), cfg.gamma, jnp.float32))
-    args = (active, bank, learned, learner_id, start) + switches
+    tick = ChunkControls(learner_id, start, jnp.ones((num_seeds,), bool),
+                         jnp.zeros((num_seeds,), bool), jnp.zeros((num_seeds,), jnp.float32),
+                         jnp.full((num_seeds,), cfg.gamma, jnp.float32))
+    args = (active, bank, learned, tick)
     t0 = time.perf_counter()
     compiled = engine.chunk.lower(state, *args).compile()
     compile_s = time.perf_counter() - t0

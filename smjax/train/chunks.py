@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.train import distributed as dist
+from smjax.train.engine import ChunkControls
 from smjax.train.seed_arrays import NonFiniteError, all_finite
 from smjax.train.slots import Slots
 from smjax.train.stages import ChunkOut, SeedControls
@@ -60,10 +61,10 @@ class ChunkRunner:
         a, slots = self.slots.arrays, self.slots
         column = lambda name, dtype: slots.per_seed(  # noqa: E731
             [getattr(c, name) for c in controls], dtype)
-        args = (a.state, slots.per_seed(active, bool), a.bank, a.learned,
-                column("option", jnp.int32), column("start", jnp.int32),
-                column("teleport", bool), column("keep_episodes", bool),
-                column("side_cost", jnp.float32), column("gamma", jnp.float32),
+        tick = ChunkControls(column("option", jnp.int32), column("start", jnp.int32),
+                             column("teleport", bool), column("keep_episodes", bool),
+                             column("side_cost", jnp.float32), column("gamma", jnp.float32))
+        args = (a.state, slots.per_seed(active, bool), a.bank, a.learned, tick,
                 (a.window, a.task_window),
                 slots.per_seed([[c.window, c.task_window] for c in controls], jnp.int32))
         compile_s = 0.0

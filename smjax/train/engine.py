@@ -34,6 +34,22 @@ class SeedState(NamedTuple):
     key: jax.Array
 
 
+class ChunkControls(NamedTuple):
+    """One seed's traced settings of a level chunk (each a per-seed array under ``chunk``),
+    the ``Controls`` of its ticks: ``learner``, the option trained; ``start``, the option
+    episodes start from; ``teleport``: options not learned yet are teleported (levels) or
+    not (fine-tuning turns); ``continue_episodes``: episodes go on when the learner's
+    option ends; ``side_cost``: the weight of the templates' side cost in the learner's
+    reward; ``gamma``: the learner's discount (traced: a sweep over it compiles once)."""
+
+    learner: Any
+    start: Any
+    teleport: Any
+    continue_episodes: Any
+    side_cost: Any
+    gamma: Any
+
+
 def make_learner(env, env_params, cfg: TrainConfig):
     """The learner ``cfg`` names (``cfg.algo`` with ``cfg.agent``), given the grids the
     environment declares in its observation (``Environment.observation_layout``), which a
@@ -158,15 +174,16 @@ class Engine:
         return jax.tree.map(lambda b, p: b.at[:, option].set(p), bank, params)
 
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
-    def seed_chunk(self, state: SeedState, active, bank, learned, learner, start, teleport,
-               continue_episodes, side_cost, gamma, windows=None, sizes=None):
+    def seed_chunk(self, state: SeedState, active, bank, learned, tick: ChunkControls,
+                   windows=None, sizes=None):
         """One seed's chunk (``chunk`` is this, vmapped over seeds and compiled).
 
-        ``teleport``/``continue_episodes``/``side_cost``: the levels' setting (teleports
-        on, episodes reset with the learner's option unless ``TrainConfig.continue_episodes``,
-        no side-cost shaping) or fine-tuning's (the learned hierarchy alone, whole task
-        episodes, side costs as ``TrainConfig.finetune_side_cost`` says). ``gamma``: the
-        seed's discount (traced: a sweep over it compiles once).
+        ``active``: whether the seed trains (the others keep their state); ``bank``: the
+        frozen policies; ``learned``: bool [O], the options in the bank; ``tick``: the
+        level's settings (teleports on, episodes reset with the learner's option unless
+        ``TrainConfig.continue_episodes``, no side-cost shaping) or a fine-tuning turn's
+        (the learned hierarchy alone, whole task episodes, side costs as
+        ``TrainConfig.finetune_side_cost`` says).
 
         ``windows``: the seed's running-success windows (learner's, task's:
         ``state.SuccessWindow``), ``sizes``: their sizes in episodes (int32 [2]; a task size
@@ -175,8 +192,8 @@ class Engine:
         (newest first) and episodes (0 while not full); the host reduces them in float64
         (``SuccessWindow.push`` says why there). Without
         ``windows`` (a benchmark timing the chunk alone) those outputs are None."""
-        controls = Controls(learner, start, learned, teleport, continue_episodes,
-                            side_cost=side_cost, gamma=gamma)
+        controls = Controls(tick.learner, tick.start, learned, tick.teleport,
+                            tick.continue_episodes, side_cost=tick.side_cost, gamma=tick.gamma)
         return self._updates(state, active, controls, bank, self._learn, windows, sizes)
 
     def _joint_chunk(self, state: SeedState, active, learned, side_cost, gamma, windows,
