@@ -28,6 +28,7 @@ import optax
 
 from smjax.agents import config as checks
 from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
+from smjax.agents.config import static, traced
 from smjax.agents.networks import (flatten_obs, masked_entropy, masked_log_softmax, masked_mean,
                                    take_action, torso_grids)
 from smjax.agents.ppo import (
@@ -42,21 +43,24 @@ from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_g
 
 @dataclass(frozen=True)
 class ActorCriticConfig:
-    learning_rate: float = 1e-3
-    gamma: float = 0.99
-    hidden_sizes: tuple[int, ...] = (100,)
-    activation: str = "relu"
-    shared_torso: bool = False
+    """The actor-critic's settings; ``traced`` ones are read from ``state.hp`` and may be
+    swept, ``static`` ones build the program (:mod:`smjax.agents.config`)."""
+
+    learning_rate: float = traced(1e-3)
+    gamma: float = static(0.99)
+    hidden_sizes: tuple[int, ...] = static((100,))
+    activation: str = static("relu")
+    shared_torso: bool = static(False)
     # "conv": convolutions over the observation's declared grids, as PPOConfig's
-    torso: str = "mlp"
-    conv_features: tuple[int, ...] = (16, 16)
-    epsilon_decay: float = 5e-3      # epsilon = max(epsilon_min, exp(-epsilon_decay * episodes))
-    epsilon_min: float = 0.0
-    vf_coef: float = 0.5
-    ent_coef: float = 0.0
-    max_grad_norm: float = 0.0       # 0 disables clipping (the reference did not clip)
-    normalize_advantages: bool = False
-    bootstrap_at_rollout_end: bool = True
+    torso: str = static("mlp")
+    conv_features: tuple[int, ...] = static((16, 16))
+    epsilon_decay: float = static(5e-3)  # epsilon = max(epsilon_min, exp(-epsilon_decay * episodes))
+    epsilon_min: float = static(0.0)
+    vf_coef: float = traced(0.5)
+    ent_coef: float = traced(0.0)
+    max_grad_norm: float = static(0.0)  # 0 disables clipping (the reference did not clip)
+    normalize_advantages: bool = static(False)
+    bootstrap_at_rollout_end: bool = static(True)
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -69,10 +73,6 @@ class ActorCriticConfig:
         checks.check_range(self, "vf_coef", 0.0)
         checks.check_range(self, "ent_coef", 0.0)
         checks.check_range(self, "max_grad_norm", 0.0)
-
-
-# the config fields the actor-critic reads from ``state.hp`` (traced: a sweep compiles once)
-SWEEPABLE = ("learning_rate", "vf_coef", "ent_coef")
 
 
 def exploration_epsilon(config: ActorCriticConfig, episodes_seen: jax.Array) -> jax.Array:
@@ -96,7 +96,7 @@ def make_agent(config: ActorCriticConfig | None = None, layout=()) -> Agent:
 
     def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
         return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions,
-                                          hyper_params(config, SWEEPABLE))
+                                          hyper_params(config))
 
     def act(state: PolicyGradientState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
         epsilon = exploration_epsilon(config, state.episodes_seen)
@@ -114,8 +114,7 @@ def make_agent(config: ActorCriticConfig | None = None, layout=()) -> Agent:
         seen = jnp.asarray(np.iinfo(np.int32).max // 2, jnp.int32)
         return state.replace(params=params, episodes_seen=seen)
 
-    return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start,
-                 SWEEPABLE)
+    return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start)
 
 
 def reinforce_loss(config: ActorCriticConfig, network_for, params, obs, action, mask, returns,

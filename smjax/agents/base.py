@@ -6,7 +6,7 @@ machinery and the learners) and are re-exported here.
 What a tick is, and how an option's ticks add up to one SMDP decision, is told in
 ``smjax.core.transition``.
 
-An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over:
+An ``Agent`` is a bundle of pure functions closed over the learner's config:
 
 * ``init(key, example_obs, num_actions) -> state`` (state is a pytree with ``.params``)
 * ``act(state, obs[B], mask[B, A], key) -> ActOutput`` (exploring behaviour policy)
@@ -20,10 +20,6 @@ An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over
   a distribution)
 * ``warm_start(state, params) -> state``: a fresh state that continues from trained
   ``params`` (fine-tuning); exploration schedules start where they ended
-* ``sweepable``: the config fields that may differ between the slots of one compiled
-  program (a hyper-parameter sweep). Their values live in the learner state
-  (``state.hp``, float32 scalars, one per slot under ``vmap``) rather than being closed
-  over, so a sweep compiles once; every other field fixes shapes or program structure
 * ``update_options(states, batch, key) -> (states, metrics)`` (optional): one update of
   a learner per option (``states``: leading axis O) on an ``OptionBatch``
   (``smjax.agents.option_batch``), each option from its own decisions only, with the
@@ -37,6 +33,13 @@ An ``Agent`` is a bundle of pure functions with its hyper-parameters closed over
   own decisions; ``update`` reads the memory that entered each tick in
   ``Transition.hidden`` (``smjax.agents.ppo`` trains through it by backpropagation
   through time)
+
+A learner's state carries ``hp``: its config's fields declared ``traced``
+(:mod:`smjax.agents.config`), as float32 scalars (:func:`hyper_params`), one per slot
+under ``vmap``. The learner reads those values from its state rather than closing over
+them, so they may differ between the slots of one compiled program (a hyper-parameter
+sweep compiles once); the fields declared ``static`` fix shapes or the program's
+structure and are closed over.
 """
 from __future__ import annotations
 
@@ -45,6 +48,7 @@ from typing import Any, Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from smjax.agents.config import traced_fields
 from smjax.core.transition import ActOutput, Transition  # noqa: F401  (re-exported)
 
 
@@ -56,14 +60,15 @@ class Agent(NamedTuple):
     policy_logits: Callable[[Any, jax.Array], jax.Array]
     frozen_policy: str = "sample"
     warm_start: Callable[[Any, Any], Any] = lambda state, params: state.replace(params=params)
-    sweepable: tuple[str, ...] = ()
     hidden_size: int = 0
     update_options: Callable[..., tuple[Any, dict]] | None = None
 
 
-def hyper_params(config: Any, names: tuple[str, ...]) -> dict[str, jax.Array]:
-    """The traced hyper-parameters a learner state carries (``state.hp``)."""
-    return {name: jnp.asarray(getattr(config, name), jnp.float32) for name in names}
+def hyper_params(config: Any) -> dict[str, jax.Array]:
+    """The traced hyper-parameters a learner state carries (``state.hp``): the fields of
+    ``config`` declared ``traced``, as float32 scalars."""
+    return {name: jnp.asarray(getattr(config, name), jnp.float32)
+            for name in traced_fields(config)}
 
 
 def scale_by_lr(updates: Any, learning_rate: jax.Array) -> Any:

@@ -1,4 +1,18 @@
-"""Validation helpers shared by the learners' config dataclasses.
+"""The learners' config dataclasses: which fields are traced, and their validation.
+
+Every field of a learner config is declared ``traced`` or ``static``. A traced field is a
+hyper-parameter the learner reads from its state (``state.hp``, a float32 scalar per slot),
+so its value is a pytree leaf: the slots of one compiled program (a sweep, fine-tuning's
+``finetune_agent``) may each have their own, and changing it compiles nothing new. A static
+field fixes shapes or the program's structure (sizes, epochs, minibatches, which code runs)
+or is a constant the program closes over; each value compiles its own program. Declaring a
+field traced is all it takes to sweep it: ``hyper_params``, the sweep's list of fields and
+its error messages all read :func:`traced_fields`.
+
+The declaration lives in the field's metadata rather than in a pytree registration of the
+config: a config is hashable, validates itself in ``__post_init__`` (a range check cannot
+run on a tracer) and is closed over by the learner's functions, while its traced values
+travel in ``state.hp``.
 
 Each config checks itself in ``__post_init__`` so a bad value fails where it was written,
 with a message naming the config, the field, the value and the allowed range.
@@ -8,6 +22,24 @@ from __future__ import annotations
 import dataclasses
 import math
 from typing import Any, Sequence
+
+TRACED = "traced"  # the field metadata key that ``traced`` and ``static`` set
+
+
+def traced(default: Any) -> Any:
+    """A config field the learner reads from ``state.hp`` (a pytree leaf: sweepable)."""
+    return dataclasses.field(default=default, metadata={TRACED: True})
+
+
+def static(default: Any) -> Any:
+    """A config field the learner's program is built from (not sweepable)."""
+    return dataclasses.field(default=default, metadata={TRACED: False})
+
+
+def traced_fields(config: Any) -> tuple[str, ...]:
+    """The names of the fields of ``config`` (a dataclass or its class) declared
+    ``traced``, in declaration order; a field declared neither way is static."""
+    return tuple(f.name for f in dataclasses.fields(config) if f.metadata.get(TRACED, False))
 
 
 def check_range(

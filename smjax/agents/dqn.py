@@ -27,6 +27,7 @@ import optax
 
 from smjax.agents import config as checks
 from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
+from smjax.agents.config import static, traced
 from smjax.agents.networks import (
     QNetwork,
     epsilon_greedy_log_probs,
@@ -43,27 +44,30 @@ from smjax.agents.smdp import episodes_with_decision, smdp_transitions
 
 @dataclass(frozen=True)
 class DQNConfig:
-    learning_rate: float = 2.5e-4
-    gamma: float = 0.99               # for the trainer's Transition.discount; not read here
-    hidden_sizes: tuple[int, ...] = (64, 64)
-    activation: str = "relu"
+    """DQN's settings; ``traced`` ones are read from ``state.hp`` and may be swept,
+    ``static`` ones build the program (:mod:`smjax.agents.config`)."""
+
+    learning_rate: float = traced(2.5e-4)
+    gamma: float = static(0.99)  # for the trainer's Transition.discount; not read here
+    hidden_sizes: tuple[int, ...] = static((64, 64))
+    activation: str = static("relu")
     # "conv": convolutions over the observation's declared grids, as PPOConfig's
-    torso: str = "mlp"
-    conv_features: tuple[int, ...] = (16, 16)
-    buffer_capacity: int = 10_000
-    batch_size: int = 64
-    gradient_steps_per_update: int = 1
-    learning_starts: int = 1_000      # transitions in the buffer before the first step
-    target_update_period: int = 100   # gradient steps between target updates
-    tau: float = 1.0                  # 1 = hard copy; < 1 = Polyak averaging
-    epsilon_start: float = 1.0
-    epsilon_end: float = 0.05
-    epsilon_decay_steps: int = 10_000
-    epsilon_schedule_unit: str = "decisions"   # or "gradient_steps"
-    double_dqn: bool = True
-    huber_loss: bool = True
-    max_grad_norm: float = 10.0
-    reward_scale: float = 1.0         # rewards are multiplied by this before the TD target
+    torso: str = static("mlp")
+    conv_features: tuple[int, ...] = static((16, 16))
+    buffer_capacity: int = static(10_000)
+    batch_size: int = static(64)
+    gradient_steps_per_update: int = static(1)
+    learning_starts: int = static(1_000)  # transitions in the buffer before the first step
+    target_update_period: int = traced(100)  # gradient steps between target updates
+    tau: float = traced(1.0)  # 1 = hard copy; < 1 = Polyak averaging
+    epsilon_start: float = static(1.0)
+    epsilon_end: float = traced(0.05)
+    epsilon_decay_steps: int = traced(10_000)
+    epsilon_schedule_unit: str = static("decisions")  # or "gradient_steps"
+    double_dqn: bool = static(True)
+    huber_loss: bool = static(True)
+    max_grad_norm: float = static(10.0)
+    reward_scale: float = traced(1.0)  # rewards are multiplied by this before the TD target
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -106,13 +110,7 @@ class DQNState:
     updates: jax.Array
     episodes_seen: jax.Array
     decisions_seen: jax.Array
-    hp: Any = flax.struct.field(default_factory=dict)  # sweepable hyper-parameters (base.py)
-
-
-# the config fields DQN reads from ``state.hp`` (traced: a sweep compiles once)
-# (shapes and the program's structure stay closed over: sizes, buffer, batch, the flags)
-SWEEPABLE = ("learning_rate", "epsilon_end", "epsilon_decay_steps", "target_update_period", "tau",
-             "reward_scale")
+    hp: Any = flax.struct.field(default_factory=dict)  # the config's traced fields (base.py)
 
 
 def linear_epsilon(config: DQNConfig, hp: dict, grad_steps: jax.Array,
@@ -190,7 +188,7 @@ def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
         buffer = empty_buffer(config.buffer_capacity, example_obs, num_actions)
         zero = jnp.zeros((), jnp.int32)
         return DQNState(params, params, optimizer.init(params), buffer, zero, zero, zero, zero,
-                        hyper_params(config, SWEEPABLE))
+                        hyper_params(config))
 
     def act(state: DQNState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
         q = q_values(state.params, obs)
@@ -217,7 +215,7 @@ def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
         return state.replace(params=params, target_params=params, decisions_seen=seen,
                              grad_steps=jnp.maximum(state.grad_steps, seen))
 
-    return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start, SWEEPABLE)
+    return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start)
 
 
 def td_loss(config: DQNConfig, q_values, params, target_params, batch):

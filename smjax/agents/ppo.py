@@ -27,6 +27,7 @@ import optax
 
 from smjax.agents import config as checks
 from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
+from smjax.agents.config import static, traced
 from smjax.agents.networks import (
     ActorCritic,
     RecurrentActorCritic,
@@ -44,50 +45,53 @@ from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, fi
 
 @dataclass(frozen=True)
 class PPOConfig:
+    """PPO's settings; ``traced`` ones are read from ``state.hp`` and may be swept,
+    ``static`` ones build the program (:mod:`smjax.agents.config`)."""
+
     # 5e-4, not PureJaxRL's 2.5e-4: Craft's levels need a quarter fewer episodes with it
-    learning_rate: float = 5e-4
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip_eps: float = 0.2
-    ent_coef: float = 0.01
-    vf_coef: float = 0.5
-    max_grad_norm: float = 0.5
+    learning_rate: float = traced(5e-4)
+    gamma: float = static(0.99)
+    gae_lambda: float = traced(0.95)
+    clip_eps: float = traced(0.2)
+    ent_coef: float = traced(0.01)
+    vf_coef: float = traced(0.5)
+    max_grad_norm: float = static(0.5)
     # 4: at 8 the hierarchy's levels are a little cheaper, but flat PPO collapses on long
     # sparse tasks, and the flat baseline must not be broken by the defaults
-    update_epochs: int = 4
-    num_minibatches: int = 4
+    update_epochs: int = static(4)
+    num_minibatches: int = static(4)
     # Early stop on the policy's drift (0: never): once a minibatch's approximate
     # KL(old || new) exceeds 1.5 x target_kl, the rest of the update's minibatches and
     # epochs leave the parameters alone (the Stable-Baselines3 rule). It bounds how far
     # many epochs can push the policy from the one that gathered the data.
-    target_kl: float = 0.0
-    hidden_sizes: tuple[int, ...] = (64, 64)
-    activation: str = "tanh"
-    shared_torso: bool = False
+    target_kl: float = traced(0.0)
+    hidden_sizes: tuple[int, ...] = static((64, 64))
+    activation: str = static("tanh")
+    shared_torso: bool = static(False)
     # "conv": the observation's declared grids (Craft's windows) pass through 3 x 3
     # convolutions of ``conv_features`` channels per layer before the dense layers
     # (networks.GridEncoder; the environment declares them: Environment.observation_layout)
-    torso: str = "mlp"
-    conv_features: tuple[int, ...] = (16, 16)
+    torso: str = static("mlp")
+    conv_features: tuple[int, ...] = static((16, 16))
     # A recurrent policy (0: memoryless): a GRU memory of this width, carried from each of
     # the option's decisions to its next (``networks.RecurrentActorCritic``), trained by
     # backpropagation through the rollout, minibatches then being sets of environments.
     # For observations that cannot tell places apart: a memoryless policy that picks
     # greedily loops where it cannot see what changed.
-    recurrent_size: int = 0
-    normalize_advantages: bool = True
-    clip_value_loss: bool = True
-    adam_eps: float = 1e-5
+    recurrent_size: int = static(0)
+    normalize_advantages: bool = static(True)
+    clip_value_loss: bool = static(True)
+    adam_eps: float = static(1e-5)
     # Joint fine-tuning's update (a learner per option) runs each option's decisions
     # through its network in blocks of this many rows (``ppo_options``): the speed
     # changes, the result does not (up to the order of float sums)
-    option_block: int = 128
+    option_block: int = static(128)
     # how joint fine-tuning updates its learners: "grouped" (every option's own decisions
     # in one pass: the work follows the decisions), "per_option" (each option's update over
     # the whole batch, masked, vmapped over options: one wide kernel per layer), or "auto"
     # (grouped on a CPU, where the work is the cost; per option on an accelerator, where
     # the grouped update's loop of small blocks costs more launches than FLOPs saved)
-    option_update: str = "auto"
+    option_update: str = static("auto")
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -124,11 +128,7 @@ class PolicyGradientState:
     updates: jax.Array
     episodes_seen: jax.Array
     decisions_seen: jax.Array
-    hp: Any = flax.struct.field(default_factory=dict)  # sweepable hyper-parameters (base.py)
-
-
-# the config fields PPO reads from ``state.hp`` (traced: one compile serves a sweep)
-SWEEPABLE = ("learning_rate", "gae_lambda", "clip_eps", "ent_coef", "vf_coef", "target_kl")
+    hp: Any = flax.struct.field(default_factory=dict)  # the config's traced fields (base.py)
 
 
 def make_network(num_actions: int, hidden_sizes, activation: str, shared_torso: bool,
@@ -242,7 +242,7 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
 
     def init(key: jax.Array, example_obs: jax.Array, num_actions: int) -> PolicyGradientState:
         return init_policy_gradient_state(network_for, optimizer, key, example_obs, num_actions,
-                                          hyper_params(config, SWEEPABLE), memory)
+                                          hyper_params(config), memory)
 
     def act(state: PolicyGradientState, obs: jax.Array, mask: jax.Array, key: jax.Array) -> ActOutput:
         return sample_actions(network_for, state.params, obs, mask, key)
@@ -266,10 +266,10 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
 
     if memory:
         return Agent("ppo", init, act_recurrent, update, policy_logits_recurrent,
-                     sweepable=SWEEPABLE, hidden_size=memory)
+                     hidden_size=memory)
     grouped = config.option_update == "grouped" or (
         config.option_update == "auto" and jax.default_backend() == "cpu")
-    return Agent("ppo", init, act, update, policy_logits, sweepable=SWEEPABLE,
+    return Agent("ppo", init, act, update, policy_logits,
                  update_options=make_update_options(config, network_for, optimizer,
                                                     config.option_block) if grouped else None)
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from smjax.agents.config import traced
 from smjax.train.bounds import short, strict_json, strict_yaml
 from smjax.train.config_checks import (  # noqa: F401 - re-exported: the config's vocabulary
     ALGOS, FINETUNE_CHOICES, FINETUNE_MODES, FROZEN_POLICIES, LEVEL_FIELDS, METHODS, ConfigError,
@@ -61,7 +62,8 @@ class TrainConfig:
       levels: per-template overrides of ``LEVEL_FIELDS``, e.g. ``{"attack": {"threshold":
         0.3}}``; a level's ``gamma`` is its learner's discount, in its level and in
         fine-tuning, and wins over a swept gamma.
-      gamma: discount per primitive tick (gamma**d for a teleported call of duration d).
+      gamma: discount per primitive tick (gamma**d for a teleported call of duration d);
+        traced (a per-slot value of the training chunk), so a sweep may vary it.
       frozen_policy: how frozen options act (auto: greedy for dqn, else sample).
       option_temperature: where frozen policies sample, the temperature of every template
         below the root (the root samples at 1).
@@ -123,7 +125,7 @@ class TrainConfig:
     success_window: int = 256
     max_episodes_per_level: int = 40_000
     max_steps_per_level: int = 0
-    gamma: float = 0.99
+    gamma: float = traced(0.99)
     frozen_policy: str = "auto"
     option_temperature: float = 1.0
     continue_episodes: bool = False

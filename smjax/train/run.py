@@ -150,9 +150,7 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
         cfg, hierarchy = cfg.replace(hierarchy=hierarchy), None
     env_overrides = dict(env_overrides or {})
     if sweep is not None:  # a bad sweep is refused before anything is locked or compiled
-        from smjax.agents import make_agent  # (imported late: tests replace it)
-
-        sweep = normalize_sweep(cfg, make_agent(cfg.algo, **cfg.agent), sweep)
+        sweep = normalize_sweep(cfg, sweep)
     if resume and out_dir is None:
         raise ValueError("resume needs the run's output directory")
     if resume_from is not None and not resume:

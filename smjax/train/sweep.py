@@ -8,9 +8,11 @@ slot computes exactly what that point's run alone would give for that seed, and 
 sweep compiles once. Slots are point-major: slot ``p * len(seeds) + i`` is point ``p``,
 seed ``seeds[i]``.
 
-Only the fields a learner declares ``sweepable`` may vary (the others fix shapes or the
-program's structure); asking for another one is refused with a :class:`ConfigError`
-that lists the sweepable ones.
+Only the fields declared ``traced`` may vary: the learner config's (``agent.NAME``, see
+:mod:`smjax.agents.config`) and the trainer's own (:class:`TrainConfig`'s ``gamma``,
+a per-slot value of the training chunk). The others fix shapes or the program's
+structure; asking for one is refused with a :class:`ConfigError` that lists the
+sweepable ones.
 """
 from __future__ import annotations
 
@@ -20,21 +22,25 @@ from typing import Any
 
 import jax
 
+from smjax.agents.config import traced_fields
 from smjax.core.overrides import parse_float
 from smjax.train.bounds import short
 from smjax.train.config import ConfigError, TrainConfig
 
 PREFIX = "agent."
-# TrainConfig fields that are traced per slot (the engine's chunk takes them per seed)
-TRAIN_SWEEPABLE = ("gamma",)
 
 
 # points of one sweep at most (each is a slot of every seed, like a seed)
 MAX_POINTS = 4096
 
 
-def sweepable_names(agent) -> list[str]:
-    return list(TRAIN_SWEEPABLE) + [PREFIX + name for name in agent.sweepable]
+def sweepable_names(algo: str) -> list[str]:
+    """The fields a sweep with learner ``algo`` may vary: TrainConfig's traced fields, then
+    the learner config's (as ``agent.NAME``), each in declaration order."""
+    from smjax.agents import default_config
+
+    return list(traced_fields(TrainConfig)) + [
+        PREFIX + name for name in traced_fields(default_config(algo))]
 
 
 def _number(key: str, value: Any) -> float:
@@ -68,11 +74,11 @@ def _check_value(cfg: TrainConfig, key: str, value: float) -> None:
         raise ConfigError(f"sweep {key}: {err}") from None
 
 
-def normalize_sweep(cfg: TrainConfig, agent, sweep: dict) -> dict[str, list[float]]:
+def normalize_sweep(cfg: TrainConfig, sweep: dict) -> dict[str, list[float]]:
     """``sweep`` checked, as ``{"agent.field": [floats]}`` (what a checkpoint records)."""
     if not isinstance(sweep, dict) or not sweep:
         raise ConfigError("a sweep needs at least one field, e.g. {'agent.learning_rate': [1e-4, 3e-4]}")
-    allowed = sweepable_names(agent)
+    allowed = sweepable_names(cfg.algo)
     fixed = sorted(name for name, fields in cfg.levels.items() if "gamma" in fields)
     if "gamma" in sweep and fixed:
         raise ConfigError(f"gamma cannot be swept while levels {fixed} set their own gamma "
