@@ -1,4 +1,5 @@
-"""One entry point for every method: make the env, resolve the hierarchy, train, write results."""
+"""One entry point for every method: make the env, resolve the hierarchy, train, and hand
+the results to the hooks, which write them."""
 from __future__ import annotations
 
 import json
@@ -191,8 +192,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
         trainer = HierarchyTrainer(engine, list(resolved.plans), slot_seeds, hp=hp,
                                    gamma=gamma, hooks=hooks + list(outputs.hooks))
     if not engine.root_has_threshold and dist.is_writer():
-        warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(resolved.hierarchy.task).threshold),
-                      stacklevel=3)
+        root = resolved.hierarchy.task
+        warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(root).threshold), stacklevel=3)
     if resume:
         with TIMELINE.span("checkpoint restore"):
             trainer.restore(resume_from, checked)
