@@ -200,7 +200,7 @@ def cmd_train(args) -> int:
         from smjax.train.distributed import is_writer
         from smjax.train.run import run
     from smjax.core.registry import get_entry
-    from smjax.viz.plots import plot_run
+    from smjax.viz.plots import PlotHook
 
     for flag, value in (("--out", args.out), ("--resume", args.resume)):
         if value is not None and not value.strip():  # else the default directory is used
@@ -222,7 +222,7 @@ def cmd_train(args) -> int:
     args.run_out = out  # for the resume command an interruption prints
     results = run(args.task, cfg, seeds, out, env_overrides=env_over, progress=not args.quiet,
                   resume=bool(args.resume), overwrite=args.overwrite, sweep=sweep,
-                  resume_from=args.resume_from, after_results=plot_run)
+                  resume_from=args.resume_from, hooks=[PlotHook()])
     if not is_writer():  # process 0 reports for the whole run
         return 0
     if args.profile:

@@ -1,5 +1,5 @@
-"""The driver loop's side jobs are hooks: a run with its own hooks gets every chunk's report,
-and a run without hooks writes and prints nothing."""
+"""The driver loop's side jobs are hooks: a run with its own hooks gets every chunk's report
+and its results (a sweep: each point's), and a run without hooks writes and prints nothing."""
 from hier_env import make_keydoor
 from smjax.agents import make_agent
 from smjax.train import TrainConfig
@@ -16,7 +16,7 @@ SMALL = TrainConfig(num_envs=8, rollout_ticks=8, updates_per_chunk=2, success_wi
 
 class Recorder(Hook):
     def __init__(self):
-        self.calls, self.reports = [], []
+        self.calls, self.reports, self.outcomes = [], [], []
 
     def start(self, trainer):
         self.calls.append("start")
@@ -27,6 +27,12 @@ class Recorder(Hook):
 
     def end(self, trainer):
         self.calls.append("end")
+
+    def results(self, trainer, report):
+        self.calls.append("results")
+        # the run's files as this hook finds them: the built-in hooks run first
+        found = sorted(p.name for p in report.out_dir.iterdir()) if report.out_dir else []
+        self.outcomes.append((report, found))
 
 
 def _trainer(hooks, seeds=(0, 1), cfg=SMALL):
@@ -115,8 +121,14 @@ def test_a_callers_hooks_run_beside_the_built_in_ones_and_wandb_gets_every_scala
     cfg = SMALL.replace(checkpoint_every=1e9)
     raw = run(make_keydoor(), cfg, [0], tmp_path / "out", progress=False,
               hooks=[recorder, WandbHook(project="p", mode="offline")])
-    assert recorder.calls[0] == "start" and recorder.calls[-1] == "end"
+    assert recorder.calls[0] == "start" and recorder.calls[-2:] == ["end", "results"]
     assert (tmp_path / "out" / "checkpoints").is_dir()  # the built-in hooks ran too
+    # the results, once, with the run's directory, written there before this hook ran
+    ((report, found),) = recorder.outcomes
+    assert report.out_dir == tmp_path / "out" and report.overrides is None
+    assert report.results == {k: v for k, v in raw.items() if k != "_raw"}
+    assert report.raw is raw["_raw"]
+    assert {"results.json", "curves.csv", "policy", "checkpoints"} <= set(found)
     (wb,) = runs
     assert wb.finished and wb.kwargs["project"] == "p" and wb.kwargs["mode"] == "offline"
     assert wb.kwargs["config"] == {k: raw["config"][k] for k in wb.kwargs["config"]}
@@ -153,3 +165,27 @@ def test_wandb_hook_without_wandb_says_how_to_install_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "wandb", None)  # import wandb raises ImportError
     with pytest.raises(ImportError, match=r"pip install 'smjax\[wandb\]'"):
         WandbHook()
+
+
+def test_a_callers_hook_gets_each_sweep_points_results_with_its_directory(tmp_path):
+    from smjax.train.run import run
+
+    recorder = Recorder()
+    cfg = SMALL.replace(finetune="off", max_episodes_per_level=60, checkpoint_every=1e9)
+    lrs = [1e-4, 1e-3]
+    out = tmp_path / "sweep"
+    swept = run(make_keydoor(), cfg, [0], out, progress=False,
+                sweep={"agent.learning_rate": lrs}, hooks=[recorder])
+    assert recorder.calls[-3:] == ["end", "results", "results"]
+    assert [r.out_dir for r, _ in recorder.outcomes] == [out / "point-0", out / "point-1"]
+    assert [r.overrides for r, _ in recorder.outcomes] == [{"agent.learning_rate": lr}
+                                                          for lr in lrs]
+    for (report, found), point in zip(recorder.outcomes, swept["points"]):
+        assert report.results == {k: v for k, v in point["results"].items() if k != "_raw"}
+        assert report.raw is point["results"]["_raw"]
+        assert found == ["curves.csv", "policy", "results.json"]
+    # no output directory: the hooks still get every point's results, with none
+    recorder = Recorder()
+    run(make_keydoor(), cfg, [0], progress=False, sweep={"agent.learning_rate": lrs},
+        hooks=[recorder])
+    assert [(r.out_dir, f) for r, f in recorder.outcomes] == [(None, [])] * 2

@@ -175,7 +175,10 @@ def test_an_error_writing_results_loses_no_training(tmp_path, monkeypatch, faili
     without training again."""
     from smjax.train.results import ResultsError
 
-    run_module = sys.modules["smjax.train.run"]  # (the package exports the function too)
+    # where each is looked up: the run builds the results, its results hook writes them
+    # (sys.modules: the package exports the function run too)
+    owner = {"build_results": sys.modules["smjax.train.run"],
+             "write_results": sys.modules["smjax.train.results"]}[failing]
 
     cfg = TrainConfig(method="flat", num_envs=16, rollout_ticks=8, updates_per_chunk=2,
                       max_episodes_per_level=60, success_window=16, eval_envs=16,
@@ -185,7 +188,7 @@ def test_an_error_writing_results_loses_no_training(tmp_path, monkeypatch, faili
     def broken(*args, **kwargs):
         raise AttributeError("module 'smjax' has no attribute '__version__'")
 
-    monkeypatch.setattr(run_module, failing, broken)
+    monkeypatch.setattr(owner, failing, broken)
     with pytest.raises(ResultsError, match=r"--resume") as err:
         run(make_keydoor(), cfg, [0], out, progress=False)
     assert str(out) in str(err.value) and "__version__" in str(err.value)

@@ -8,7 +8,7 @@ from hier_env import make_keydoor
 from smjax.train import ConfigError, TrainConfig
 from smjax.train.run import run
 from smjax.train.results import CURVE_COLUMNS
-from smjax.viz.plots import plot_run
+from smjax.viz.plots import PlotHook
 
 SMALL = dict(num_envs=32, rollout_ticks=16, updates_per_chunk=4, max_episodes_per_level=4000,
              success_window=64, eval_envs=64, finetune_max_episodes=400,
@@ -20,7 +20,7 @@ def top_down_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("td")
     # with TensorBoard files (host-side logging; the compiled program is the same)
     res = run(make_keydoor(), TrainConfig(**SMALL, tensorboard=True), [0, 1], out, progress=False,
-              after_results=plot_run)
+              hooks=[PlotHook()])
     return res, out
 
 

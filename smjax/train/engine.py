@@ -20,7 +20,7 @@ from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
     EVAL_TEMPERATURES, early_stop_bounds, eval_temperatures, seed_batched_episodes)
 from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
-from smjax.train.config import TrainConfig
+from smjax.train.config import ConfigError, TrainConfig
 from smjax.train.program_cache import compile_program
 
 
@@ -64,10 +64,21 @@ def frozen_mode(cfg: TrainConfig, agent) -> str:
     return agent.frozen_policy if cfg.frozen_policy == "auto" else cfg.frozen_policy
 
 
+def check_joint_learner(cfg: TrainConfig, agent) -> None:
+    """Refuse joint fine-tuning of a recurrent policy (its memory is not carried across
+    the options that joint fine-tuning trains at once)."""
+    if cfg.fine_tuning.on and cfg.fine_tuning.mode == "joint" and agent.hidden_size:
+        raise ConfigError("config field 'finetune_mode' = 'joint' does not run a recurrent "
+                          "policy (--agent recurrent_size): add --finetune-mode turns "
+                          "(finetune_mode: turns)")
+
+
 class Engine:
     """Builds the jitted, seed-vmapped functions for one (env, hierarchy, agent, config)."""
 
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, cfg: TrainConfig):
+        # refused before the first program below compiles: the joint chunk is built here
+        check_joint_learner(cfg, agent)
         self.env, self.env_params, self.h, self.agent, self.cfg = env, env_params, hierarchy, agent, cfg
         mode = frozen_mode(cfg, agent)
         self.frozen_policy = mode

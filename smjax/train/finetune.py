@@ -51,7 +51,7 @@ from smjax.train import distributed as dist
 from smjax.train.config import TrainConfig
 from smjax.train.finetune_ops import bank_rows, next_turn, store_learned
 from smjax.train.levels import count_level, freeze_learners, level_tag
-from smjax.train.plans import LevelPlan, check_joint_learner, finetune_order
+from smjax.train.plans import LevelPlan, finetune_order
 from smjax.train.seed_arrays import fold_in, freeze, select_seeds
 from smjax.train.slots import Slots
 from smjax.train.stages import (
@@ -75,7 +75,6 @@ class FinetuneStage:
         self.hp: dict = {}
         self.index = len(plans)
         self.order = finetune_order(engine.h, cfg)  # the turns' options, round and round
-        check_joint_learner(engine.h, cfg, engine.agent)
         self.joint = cfg.fine_tuning.mode == "joint"
         # the level number fine-tuning's curve is recorded under (after the last level)
         self.level = max(p.level for p in plans) + 1

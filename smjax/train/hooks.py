@@ -2,9 +2,12 @@
 
 After every chunk the loop hands each hook a ``ChunkReport`` (the scalars the stages
 logged, where every seed stands, whether a level, turn or phase ended), in the spirit of
-Brax's ``progress_fn``: the loop itself writes and prints nothing, its hooks do. The
-hooks here: TensorBoard (``TensorBoardHook``) and checkpoints (``CheckpointHook``, which
-also restores them); the progress bar is :class:`smjax.train.progress.ProgressBar`.
+Brax's ``progress_fn``: the loop itself writes and prints nothing, its hooks do. Once the
+trained hierarchies are evaluated, ``run`` hands each hook a ``ResultsReport`` (a sweep: one
+per point). The hooks here: TensorBoard (``TensorBoardHook``) and checkpoints
+(``CheckpointHook``, which also restores them); the progress bar is
+:class:`smjax.train.progress.ProgressBar`, the run's files
+:class:`smjax.train.results.ResultsHook`, its curves.png ``smjax.viz.plots.PlotHook``.
 """
 from __future__ import annotations
 
@@ -43,6 +46,15 @@ class ChunkReport:
     stage_ended: bool           # a level, turn or phase ended in this chunk
 
 
+@dataclass(frozen=True)
+class ResultsReport:
+    """A run's results, or one sweep point's, for the hooks."""
+    out_dir: Path | None        # where its files go (a sweep: OUT/point-<k>); None: nowhere
+    results: dict               # results.json's content
+    raw: dict                   # the trainer's raw results (a sweep: the point's slots)
+    overrides: dict | None = None   # a sweep point's swept values (None: not a sweep)
+
+
 class Hook:
     """A side job of training; override what it needs."""
 
@@ -54,6 +66,11 @@ class Hook:
 
     def end(self, trainer) -> None:
         """Every seed finished training (evaluation follows)."""
+
+    def results(self, trainer, report: ResultsReport) -> None:
+        """The evaluated results are ready: once per run, once per point of a sweep (in
+        ``sweep.json``'s order). Every process gets them, as it gets the chunks; a hook
+        that writes files writes on process 0 (``smjax.train.distributed.is_writer``)."""
 
 
 class TensorBoardHook(Hook):

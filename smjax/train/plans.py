@@ -31,6 +31,12 @@ class RunPlan:
     hierarchy: Hierarchy
     plans: tuple[LevelPlan, ...]
 
+    @property
+    def num_stages(self) -> int:
+        """The stages a seed goes through: its levels, and fine-tuning where it runs (as
+        ``HierarchyTrainer.num_stages`` counts them)."""
+        return len(self.plans) + self.cfg.fine_tuning.on
+
 
 def resolve_run(env, cfg: TrainConfig, given: Hierarchy | None = None) -> RunPlan:
     """The one resolution of a run's config against its environment: the hierarchy
@@ -52,20 +58,6 @@ def resolve_run(env, cfg: TrainConfig, given: Hierarchy | None = None) -> RunPla
 def finetune_order(hierarchy: Hierarchy, cfg: TrainConfig) -> list[LevelPlan]:
     """The options fine-tuning trains, in order (none where it is off)."""
     return plan_levels(hierarchy, "top-down") if cfg.fine_tuning.on else []
-
-
-def stage_count(hierarchy: Hierarchy, plans: list[LevelPlan], cfg: TrainConfig) -> int:
-    """The stages a seed goes through: its levels, and fine-tuning where it runs."""
-    return len(plans) + bool(finetune_order(hierarchy, cfg))
-
-
-def check_joint_learner(hierarchy: Hierarchy, cfg: TrainConfig, agent) -> None:
-    """Refuse joint fine-tuning of a recurrent policy (its memory is not carried across
-    the options that joint fine-tuning trains at once)."""
-    if finetune_order(hierarchy, cfg) and cfg.fine_tuning.mode == "joint" and agent.hidden_size:
-        raise ConfigError("config field 'finetune_mode' = 'joint' does not run a recurrent "
-                          "policy (--agent recurrent_size): add --finetune-mode turns "
-                          "(finetune_mode: turns)")
 
 
 def resolve_hierarchy(env, cfg: TrainConfig, given: Hierarchy | None = None

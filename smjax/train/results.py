@@ -1,6 +1,7 @@
-"""results.json and curves.csv, in the format docs/guide.md ("Results format") describes.
+"""results.json and curves.csv, in the format docs/guide.md ("Results format") describes,
+written with the saved policy by ``ResultsHook``.
 
-curves.png is drawn above this layer (``smjax.viz.plots.plot_run``, which reads these
+curves.png is drawn above this layer (``smjax.viz.plots.PlotHook``, which reads these
 files): training never imports plotting."""
 from __future__ import annotations
 
@@ -13,6 +14,9 @@ import jax
 
 from smjax.core.files import atomic_write_text, json_safe
 from smjax.core.version import smjax_version
+from smjax.policy.artifact import write_policy
+from smjax.train import distributed as dist
+from smjax.train.hooks import Hook, ResultsReport
 
 # running_success: the mean success over the last success_window learner episodes (the
 # level's learner; in fine-tuning, whole-task episodes). The curves.csv of an smjax that
@@ -119,6 +123,27 @@ def write_results(out_dir: str | Path, results: dict, curves: list[tuple]) -> No
         ret_s = "" if ret is None or (isinstance(ret, float) and math.isnan(ret)) else f"{ret:.6g}"
         rows.append(f"{seed},{level},{template},{eps},{steps},{ret_s}")
     atomic_write_text(out / "curves.csv", "\n".join(rows) + "\n")
+
+
+class ResultsHook(Hook):
+    """results.json, curves.csv and the saved policy (``policy/``) in the report's
+    directory: a run's, or each sweep point's. ``policy``: the saved policy's description
+    of the run (``smjax.policy.artifact.policy_meta``); its seeds and config are the
+    results'. Every process runs it (the policy's arrays are gathered, a collective where
+    they are spread over processes); process 0 writes."""
+
+    def __init__(self, policy: dict):
+        self.policy = policy
+
+    def results(self, trainer, report: ResultsReport) -> None:
+        if report.out_dir is None:
+            return
+        raw, results = report.raw, report.results
+        arrays = dist.gather({k: raw[k] for k in ("bank", "learned", "eval_keys")})
+        if dist.is_writer():
+            write_results(report.out_dir, results, raw["curves"])
+            meta = self.policy | {"seeds": results["seeds"], "config": results["config"]}
+            write_policy(report.out_dir, meta, arrays)
 
 
 def write_sweep(out_dir: str | Path, sweep: dict) -> None:

@@ -1,10 +1,11 @@
-"""One entry point for every method: make the env, resolve the hierarchy, train, write results."""
+"""One entry point for every method: make the env, resolve the hierarchy, train, and hand
+the results to the hooks, which write them."""
 from __future__ import annotations
 
 import json
 import warnings
 from pathlib import Path
-from typing import Any, Callable, NamedTuple, Sequence
+from typing import Any, NamedTuple, Sequence
 
 from smjax.core.compile_cache import enable_compilation_cache
 from smjax.core.registry import make
@@ -14,17 +15,17 @@ from smjax.train import distributed as dist
 from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig, config_differences
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
-from smjax.train.hooks import CHECKPOINT_FORMAT, Hook
+from smjax.train.hooks import CHECKPOINT_FORMAT, Hook, ResultsReport
 from smjax.train.loop import HierarchyTrainer, NonFiniteError, default_hooks
 from smjax.train.program_cache import cacheable_identity
-from smjax.policy.artifact import policy_meta, write_policy
+from smjax.policy.artifact import policy_meta
 from smjax.policy.hierarchies import declared_identity
-from smjax.train.plans import check_joint_learner, resolve_run, stage_count
+from smjax.train.plans import resolve_run
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.restorable import check_restorable
 from smjax.train.reward_probe import nonfinite_reward
-from smjax.train.results import ResultsError, build_results, write_results, write_sweep
+from smjax.train.results import ResultsError, ResultsHook, build_results, write_sweep
 from smjax.train.seed_arrays import final_evaluation_keys
 from smjax.train.sweep import normalize_sweep, point_config, point_raw, slot_layout, sweep_points
 
@@ -105,40 +106,24 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
         env_overrides: dict | None = None, progress: bool = True, resume: bool = False,
         overwrite: bool = False, sweep: dict | None = None,
         hierarchy: Hierarchy | str | None = None, resume_from: str | None = None,
-        after_results: Callable[[Path], Any] | None = None,
         hooks: Sequence[Hook] = ()) -> dict:
-    """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program.
+    """Train ``task`` with ``cfg`` for all ``seeds`` in one compiled program; returns the
+    results dict (docs/guide.md, "Results format").
 
-    ``task`` is a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair
-    for environments you define yourself. Returns the results dict (docs/guide.md, "Results format");
-    with ``out_dir`` also writes results.json, curves.csv, the saved policy
-    (``policy/``, loaded by ``smjax.load_policy``) and checkpoints there, then calls
-    ``after_results(out_dir)`` (a sweep: with each point's directory), e.g.
-    ``smjax.viz.plots.plot_run`` to draw curves.png as ``smjax train`` does. With several processes (``smjax.train.distributed.initialize`` called first,
-    every process running this same call) they train together and only process 0 reads
-    and writes ``out_dir``. ``resume=True`` continues from ``out_dir``'s last checkpoint; a checkpoint of
-    a different configuration is refused (the error names the differing fields).
-    ``out_dir`` is validated and locked before anything compiles: a directory in use by
-    another run, or holding a run's files without ``resume`` or ``overwrite`` (which
-    deletes them), is refused.
-
-    ``hierarchy``: a name from the environment's catalogue (as ``cfg.hierarchy``), or a
-    :class:`~smjax.options.Hierarchy` declared by the caller (``declare(env, task,
-    children)``, templates of its own included): no subclass needed. A declared hierarchy's
-    shape is part of the run's identity; resume by passing the same one again.
-
-    ``sweep`` (``{"agent.learning_rate": [1e-4, 3e-4], ...}``) trains every point of the
-    lists' cartesian product for every seed in the same one compiled program
-    (:mod:`smjax.train.sweep`) and returns ``{"points": [{"overrides", "results"}, ...],
-    "compile_seconds"}``; a point's results are those of its run alone. With ``out_dir``
-    it writes sweep.json there and each point's files under ``point-<k>/``.
-
-    ``resume_from`` (with ``resume``): a checkpoint step to resume instead of the latest
-    (``"step-30"``), e.g. the previous good one where the latest is corrupt.
-
-    ``hooks``: side jobs of training (:class:`smjax.train.hooks.Hook`: ``start``, ``chunk``
-    with each chunk's ``ChunkReport``, ``end``), run after the built-in ones (progress bar,
-    TensorBoard, checkpoints), e.g. ``smjax.train.wandb_hook.WandbHook``.
+    ``task``: a registered name (``"craft/get_gem"``) or an ``(env, env_params)`` pair.
+    ``out_dir``: where checkpoints, results.json, curves.csv and the saved policy
+    (``policy/``) go; validated and locked before anything compiles (a directory in use, or
+    holding a run's files without ``resume`` or ``overwrite``, is refused). ``resume``
+    continues from its last checkpoint (``resume_from``: an older step, ``"step-30"``); a
+    checkpoint of another configuration is refused naming the fields. ``hierarchy``: a
+    catalogue name (as ``cfg.hierarchy``) or a declared :class:`~smjax.options.Hierarchy`
+    (pass it again to resume). ``sweep`` (``{"agent.learning_rate": [1e-4, 3e-4]}``):
+    every point of the lists' product for every seed in the same program (docs/guide.md,
+    "Sweeps"); returns ``{"points": [{"overrides", "results"}, ...], "compile_seconds"}``.
+    ``hooks``: the caller's side jobs (:class:`smjax.train.hooks.Hook`), after the built-in
+    ones (progress bar, TensorBoard, checkpoints, the files above), e.g.
+    ``smjax.viz.plots.PlotHook()`` for curves.png as ``smjax train`` draws it. With several
+    processes every one makes this same call, and process 0 alone touches ``out_dir``.
     """
     enable_compilation_cache()  # a second run of the same programs skips compiling
     TIMELINE.listen_to_jax()
@@ -148,7 +133,6 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
             raise ConfigError(f"hierarchy {hierarchy!r} contradicts the config's hierarchy "
                               f"{cfg.hierarchy!r}; give one of them")
         cfg, hierarchy = cfg.replace(hierarchy=hierarchy), None
-    env_overrides = dict(env_overrides or {})
     if sweep is not None:  # a bad sweep is refused before anything is locked or compiled
         sweep = normalize_sweep(cfg, sweep)
     if resume and out_dir is None:
@@ -158,33 +142,30 @@ def run(task: str | tuple, cfg: TrainConfig, seeds, out_dir: str | Path | None =
     with TIMELINE.span("output directory check and lock"):
         lock = _claim_out_dir(out_dir, resume, overwrite) if out_dir is not None else None
     try:
-        return _run_locked(task, cfg, seeds, Outputs(out_dir, after_results, tuple(hooks)),
-                           env_overrides, progress, resume, sweep, hierarchy, resume_from)
+        return _run_locked(task, cfg, seeds, Outputs(out_dir, tuple(hooks), progress),
+                           dict(env_overrides or {}), resume, sweep, hierarchy, resume_from)
     finally:
         if lock is not None:
             lock.release()
 
 
 class Outputs(NamedTuple):
-    """Where a run writes (None: nowhere) and what runs after its results are written."""
+    """Where a run writes (None: nowhere) and who hears of it."""
 
     out_dir: str | Path | None
-    after_results: Callable[[Path], Any] | None = None
     hooks: tuple[Hook, ...] = ()  # the caller's, after the built-in ones
+    progress: bool = True         # the progress bar (process 0)
 
 
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
-                env_overrides: dict, progress: bool, resume: bool, sweep: dict | None,
+                env_overrides: dict, resume: bool, sweep: dict | None,
                 given: Hierarchy | None = None, resume_from: str | None = None) -> dict:
     out_dir = outputs.out_dir
     points = sweep_points(sweep) if sweep is not None else None
     with TIMELINE.span("environment, learner and hierarchy"):
-        if isinstance(task, str):
-            env, env_params = make(task, **env_overrides)
-        else:
-            env, env_params = task
+        env, env_params = make(task, **env_overrides) if isinstance(task, str) else task
         resolved = resolve_run(env, cfg, given)
-        cfg, hierarchy, plans = resolved.cfg, resolved.hierarchy, list(resolved.plans)
+        cfg = resolved.cfg
         agent = make_learner(env, env_params, cfg)
     identity = run_identity(env.name, cfg, seeds, env_overrides)
     if given is not None:  # its shape must match on resume
@@ -192,24 +173,25 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
     if sweep is not None:  # a checkpoint of a sweep resumes only that sweep
         identity["sweep"] = sweep
     _check_checkpoint(out_dir, identity, resume, resume_from)
-    check_joint_learner(hierarchy, cfg, agent)
     slot_seeds, hp, configs = (slot_layout(cfg, points, seeds) if points is not None
                                else (seeds, None, None))
     # the checkpoint's files and host state, checked before the trainer compiles anything
-    checked = (check_restorable(out_dir, resume_from, len(slot_seeds),
-                                stage_count(hierarchy, plans, cfg), CHECKPOINT_FORMAT)
-               if resume else None)
+    checked = (check_restorable(out_dir, resume_from, len(slot_seeds), resolved.num_stages,
+                                CHECKPOINT_FORMAT) if resume else None)
     with TIMELINE.span("memory check, engine and trainer"):
         check_fits(env, env_params, cfg, len(slot_seeds))
-        engine = Engine(env, env_params, hierarchy, agent, cfg)
+        engine = Engine(env, env_params, resolved.hierarchy, agent, cfg)
         engine.program_identity = cacheable_identity(
             task, given, identity | {"task_name": task, "config": cfg.to_dict()})
-        hooks = default_hooks(cfg, out_dir, progress, identity) + list(outputs.hooks)
-        trainer = HierarchyTrainer(engine, plans, slot_seeds, hp=hp, configs=configs,
-                                   hooks=hooks)
+        hooks = default_hooks(cfg, out_dir, outputs.progress, identity)
+        if out_dir is not None:  # the run's files, before the caller's hooks read them
+            hooks.append(ResultsHook(
+                _policy_meta(task, engine, resolved.hierarchy_name, given, env_overrides)))
+        trainer = HierarchyTrainer(engine, list(resolved.plans), slot_seeds, hp=hp,
+                                   configs=configs, hooks=hooks + list(outputs.hooks))
     if not engine.root_has_threshold and dist.is_writer():
-        warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(hierarchy.task).threshold),
-                      stacklevel=3)
+        root = resolved.hierarchy.task
+        warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(root).threshold), stacklevel=3)
     if resume:
         with TIMELINE.span("checkpoint restore"):
             trainer.restore(resume_from, checked)
@@ -217,18 +199,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
     raw["eval_keys"] = final_evaluation_keys(trainer.arrays.keys)
     extra = {"hierarchy_used": resolved.hierarchy_name, "env_overrides": env_overrides,
              "success_unbounded": not engine.root_has_threshold}
-    policy = _policy_meta(task, engine, resolved.hierarchy_name, given, env_overrides)
-    try:
-        return _results(env.name, cfg, seeds, raw, extra, outputs, policy, points,
-                        len(slot_seeds))
-    except Exception as err:  # noqa: BLE001 - any failure here must not lose the training
-        if out_dir is None:
-            raise
-        raise ResultsError(
-            f"training finished and is checkpointed in {ckpt.checkpoint_dir(out_dir)}; "
-            f"resume it (smjax train ... --resume {out_dir}, or run(..., resume=True)) to "
-            f"write its results without training again. Writing them failed: "
-            f"{type(err).__name__}: {err}") from err
+    return _results(trainer, env.name, cfg, seeds, raw, extra, out_dir, points)
 
 
 def _check_checkpoint(out_dir, identity: dict, resume: bool, resume_from: str | None) -> None:
@@ -256,23 +227,32 @@ def _train(trainer: HierarchyTrainer, env, env_params, out_dir) -> dict:
         raise NonFiniteError(f"{err}; {why}{_kept(out_dir, remedy)}") from None
 
 
-def _results(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
-             outputs: Outputs, policy: dict, points: list | None, num_slots: int) -> dict:
-    """The run's results (written to ``outputs.out_dir``), or each sweep point's and
-    sweep.json. The final checkpoint (``trained``) was written before: a failure here
-    loses nothing."""
-    if points is None:
-        return _finish(env_name, cfg, seeds, raw, extra, outputs, policy)
-    out = {"points": [], "compile_seconds": raw["compile_seconds"]}
-    out_dir = outputs.out_dir
-    for p, point in enumerate(points):
-        part = point_raw(raw, p, len(seeds), num_slots)
-        where = outputs._replace(out_dir=None if out_dir is None else Path(out_dir) / f"point-{p}")
-        results = _finish(env_name, point_config(cfg, point), seeds, part, extra, where, policy)
-        out["points"].append({"overrides": point, "results": results})
-    if out_dir is not None and dist.is_writer():
-        write_sweep(out_dir, out)
-    return out
+def _results(trainer: HierarchyTrainer, env_name: str, cfg: TrainConfig, seeds: list[int],
+             raw: dict, extra: dict, out_dir, points: list | None) -> dict:
+    """The run's results, or each sweep point's and sweep.json, handed to the hooks (which
+    write the files). The final checkpoint (``trained``) was written before: a failure
+    here loses nothing, and the error says how to write them from that checkpoint."""
+    try:
+        if points is None:
+            return _report(trainer, env_name, cfg, seeds, raw, extra, out_dir)
+        out = {"points": [], "compile_seconds": raw["compile_seconds"]}
+        for p, point in enumerate(points):
+            part = point_raw(raw, p, len(seeds), len(trainer.seeds))
+            where = None if out_dir is None else Path(out_dir) / f"point-{p}"
+            results = _report(trainer, env_name, point_config(cfg, point), seeds, part, extra,
+                              where, point)
+            out["points"].append({"overrides": point, "results": results})
+        if out_dir is not None and dist.is_writer():
+            write_sweep(out_dir, out)  # the sweep's index of its points, as run returns it
+        return out
+    except Exception as err:  # noqa: BLE001 - any failure here must not lose the training
+        if out_dir is None:
+            raise
+        raise ResultsError(
+            f"training finished and is checkpointed in {ckpt.checkpoint_dir(out_dir)}; "
+            f"resume it (smjax train ... --resume {out_dir}, or run(..., resume=True)) to "
+            f"write its results without training again. Writing them failed: "
+            f"{type(err).__name__}: {err}") from err
 
 
 _UNBOUNDED = ("{}: the task's success is the episode return, not known to lie in [0, 1] "
@@ -282,23 +262,18 @@ _UNBOUNDED = ("{}: the task's success is the episode return, not known to lie in
               "the threshold")
 
 
-def _finish(env_name: str, cfg: TrainConfig, seeds: list[int], raw: dict, extra: dict,
-            outputs: Outputs, policy: dict) -> dict:
-    """results.json, curves and the saved policy of a run, or of one point of a sweep."""
+def _report(trainer: HierarchyTrainer, env_name: str, cfg: TrainConfig, seeds: list[int],
+            raw: dict, extra: dict, out_dir, overrides: dict | None = None) -> dict:
+    """The results of a run, or of one point of a sweep, handed to every hook (results.json,
+    curves.csv and the saved policy are the built-in ``ResultsHook``'s); with ``_raw``."""
     config = cfg.to_dict() | extra
     unbounded = config.pop("success_unbounded", False)
     results = build_results(env_name, cfg.method, cfg.algo, seeds, cfg.threshold, raw, config,
                             success_unbounded=unbounded)
-    out_dir = outputs.out_dir
-    # (a collective where the arrays are spread over processes: every process gathers)
-    arrays = None if out_dir is None else dist.gather(
-        {"bank": raw["bank"], "learned": raw["learned"], "eval_keys": raw["eval_keys"]})
-    if out_dir is not None and dist.is_writer():
-        with TIMELINE.span("results.json, curves.csv, curves.png"):
-            write_results(out_dir, results, raw["curves"])
-            write_policy(out_dir, policy | {"seeds": list(seeds), "config": config}, arrays)
-            if outputs.after_results is not None:
-                outputs.after_results(Path(out_dir))
+    report = ResultsReport(None if out_dir is None else Path(out_dir), results, raw, overrides)
+    with TIMELINE.span("results.json, curves.csv, curves.png"):
+        for hook in trainer.hooks:
+            hook.results(trainer, report)
     results_with_raw: dict[str, Any] = dict(results)
     results_with_raw["_raw"] = raw
     return results_with_raw

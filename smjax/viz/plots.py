@@ -1,6 +1,6 @@
 """Learning-curve plots in the paper's style: running success vs episodes, one panel per
 level, and one for fine-tuning (the task's teleport-free success, with the evaluated
-final_success before and after it)."""
+final_success before and after it); ``PlotHook`` draws a run's own as it finishes."""
 from __future__ import annotations
 
 import csv
@@ -10,6 +10,9 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+
+from smjax.train import distributed as dist
+from smjax.train.hooks import Hook, ResultsReport
 
 
 def _load(run_dir: Path):
@@ -197,7 +200,16 @@ def _label_panels(axes, levels) -> None:
 
 
 def plot_run(run_dir) -> Path:
-    """A run's own curves.png, drawn from its curves.csv and results.json (``smjax train``
-    passes this to ``run(..., after_results=...)``; a library caller may do the same)."""
+    """A run's own curves.png, drawn from its curves.csv and results.json."""
     run_dir = Path(run_dir)
     return plot_curves([run_dir], run_dir / "curves.png")
+
+
+class PlotHook(Hook):
+    """curves.png beside each results.json a run writes (a sweep: in every ``point-<k>/``),
+    as ``smjax train`` draws it: ``run(..., hooks=[PlotHook()])``. It reads the files the
+    built-in results hook wrote before it; process 0 draws."""
+
+    def results(self, trainer, report: ResultsReport) -> None:
+        if report.out_dir is not None and dist.is_writer():
+            plot_run(report.out_dir)
