@@ -1,7 +1,7 @@
 """resolve_config merges a run's configuration sources in one order; the trainer's host
-state round-trips through the checkpoint's JSON layout (format 3, and reads format 2's);
-the device's running-success window gives what the host's float64 lists gave. Fast: only
-small programs compile."""
+state round-trips through the checkpoint's JSON layout, and one lacking a counter is named;
+the device's running-success window gives what float64 host lists of its batches give.
+Fast: only small programs compile."""
 import json
 import random
 
@@ -13,7 +13,7 @@ from smjax.train import ConfigError, TrainConfig
 from smjax.train.config import RUN_SETTINGS, resolve_config
 from smjax.train.plans import LevelPlan
 from smjax.train.run import run_identity
-from smjax.train.state import SuccessWindow, TrainerState
+from smjax.train.state import SuccessWindow, TrainerState, missing_counter
 
 
 def test_sources_override_in_order(tmp_path):
@@ -102,34 +102,29 @@ def test_host_state_round_trips_through_the_checkpoint_layout():
     assert host["finetune"]["turns"] == [[{"template": "root", "episodes": 5,
                                            "running_success": None}], []]
     assert TrainerState.from_json(host) == st
-    assert "history" not in host and "task_history" not in host["finetune"]
-    # format 2 listed the windows in the host state (read into the arrays by
-    # ``TrainArrays.migrated``): the rest of its host state reads as before
-    old = host | {"history": [[], [[1.0, 2]]]}
-    old["finetune"] = old["finetune"] | {"task_history": [[[0.0, 3], [2.0, 2]], []]}
-    assert TrainerState.from_json(old) == st
+    assert missing_counter(host, 2) is None
 
 
-def test_host_state_written_before_gate_uncalled_resumes_and_records_it():
-    """A checkpoint from before the gate's uncalled share was recorded: no such counter or
-    record key. It resumes with the counter unset, and the next level it finishes records
-    the share."""
+def test_a_host_state_lacking_a_counter_is_named():
+    """Every counter and level record ``to_json`` writes, over every seed, is needed to
+    resume: one missing (or of another length) is named, before ``from_json`` reads it."""
     plans = [LevelPlan("root", 0, 0, 2), LevelPlan("get_wood", 1, 0, 1)]
     host = json.loads(json.dumps(TrainerState.new(plans, 2).to_json()))
-    del host["gate_uncalled"]
-    for record in host["levels"]:
-        del record["gate_uncalled"]
-    st = TrainerState.from_json(host)
-    assert [c.gate_uncalled for c in st.level] == [None, None]
-    st.level[0].record_gate({"success": [0.5, 0.0], "uncalled": [0.125, 0.0],
-                             "env_steps": [64, 0]}, 0, 3)
-    st.finish_level(0)
-    assert st.levels[0]["gate_uncalled"] == [0.125, None]
-    assert st.levels[0]["gate_success"] == [0.5, None]
+    assert missing_counter(host, 2) is None
+    assert "over its 3 seeds" in missing_counter(host, 3)
+    for damage, name in ((lambda h: h.pop("gate_uncalled"), "counter gate_uncalled "),
+                         (lambda h: h["levels"][1].pop("gate_uncalled"),
+                          "counter levels[1] gate_uncalled "),
+                         (lambda h: h["finetune"].pop("baseline"), "counter finetune baseline "),
+                         (lambda h: h["started"].pop(), "counter started ")):
+        damaged = json.loads(json.dumps(host))
+        damage(damaged)
+        assert name in missing_counter(damaged, 2)
 
 
 def _append_window(history: list, total: float, count: int, window: int) -> float | None:
-    """The host window before format 3 (smjax's ``state.append_window``), the reference."""
+    """A host list of ``[total, count]`` batches, trimmed to the window, summed in float64:
+    the reference."""
     if count:
         history.append([total, count])
     total, seen, keep = 0.0, 0, 0
@@ -160,11 +155,10 @@ def test_the_window_averages_whole_batches_of_at_least_its_length():
 
 
 @pytest.mark.parametrize("size,slots", [(1, 1), (5, 5), (7, 12), (16, 16)])
-def test_the_device_window_equals_the_host_lists_and_migrates_from_them(size, slots):
+def test_the_device_window_equals_the_host_lists(size, slots):
     """The same running success, bit for bit, as the float64 host lists, for binary and
     fractional successes (float32 batch totals), through wrap-arounds of the ring and
-    empty updates; a window built from the host lists (format 2's checkpoints) goes on
-    exactly as the pushed one."""
+    empty updates."""
     rng = random.Random(size * 100 + slots)
     win, history = SuccessWindow.empty(1, slots), []
     for step in range(300):
@@ -175,5 +169,3 @@ def test_the_device_window_equals_the_host_lists_and_migrates_from_them(size, sl
             total = float(np.float32(sum(rng.random() / 3 for _ in range(count))))
         win, running = _running(win, total, count, size)
         assert running == _append_window(history, total, count, size), step
-        if step % 37 == 5:  # as a format-2 checkpoint restores
-            win = SuccessWindow.from_lists([list(history)], slots)

@@ -9,8 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from _helpers import (MachineLost, as_format_2, as_format_3, lose_machine_after_save,
-                      without_levels_bank)
+from _helpers import MachineLost, lose_machine_after_save, with_format
 from hier_env import KeyDoor, make_keydoor
 from smjax.agents import make_agent
 from smjax.train import ConfigError, TrainConfig
@@ -186,34 +185,19 @@ def test_resume_during_finetuning_is_exact(tmp_path, monkeypatch):
     with pytest.raises(MachineLost):
         run(make_keydoor(), cfg, [0, 1], out, progress=False)
     monkeypatch.undo()
-    assert any(t >= 1 for t in ckpt.load_meta(out)["meta"]["host"]["finetune"]["turn"])
-    # the same checkpoint as earlier smjax wrote it resumes: format 3 (no levels' bank) and
-    # format 2 (also the windows as host lists, from which its windows are built)
-    olds = {3: tmp_path / "format3", 2: tmp_path / "format2"}
-    lost = tmp_path / "lost"  # format 4 as a resume from an older one leaves it (below)
-    shutil.copytree(out, lost)
-    without_levels_bank(lost)
-    bank_leaves = len(jax.tree.leaves(straight["_raw"]["bank"]))
-    for version, old in olds.items():
-        shutil.copytree(out, old)
-        as_format_3(old, bank_leaves)
-        if version == 2:
-            as_format_2(old, SMALL["success_window"])
-    host = ckpt.load_meta(olds[2])["meta"]["host"]
-    assert any(host["finetune"]["task_history"]) and any(host["history"])
+    host = ckpt.load_meta(out)["meta"]["host"]
+    assert any(t >= 1 for t in host["finetune"]["turn"])
+    assert any(stage == 2 for stage in host["stage"])  # 2 levels, then fine-tuning
+    # the same checkpoint marked as of an older format is refused, naming both formats,
+    # before the trainer is built; this one resumes exactly, its levels' bank included
+    old = tmp_path / "format4"
+    shutil.copytree(out, old)
+    with_format(old, 4)
+    with pytest.raises(ckpt.CheckpointError, match="of format 4.*resumes format 5 only"):
+        run(make_keydoor(), cfg, [0, 1], old, progress=False, resume=True)
     resumed = run(make_keydoor(), cfg, [0, 1], out, progress=False, resume=True)
     assert _strip_timing(resumed) == _strip_timing(straight)
-    # a seed already fine-tuning at the checkpoint lost its levels' bank in the older
-    # formats: it keeps its fine-tuned one. Otherwise they resume exactly as the same
-    # checkpoint with that bank marked lost
-    tuning = [s for s, stage in enumerate(host["stage"]) if stage == 2]  # 2 levels, then FT
-    assert tuning
-    expected = _strip_timing(run(make_keydoor(), cfg, [0, 1], lost, progress=False, resume=True))
-    assert [expected["finetune"]["baseline"][s] for s in tuning] == [False] * len(tuning)
-    assert [expected["finetune"]["kept"][s] for s in tuning] == ["fine-tuned"] * len(tuning)
-    for old in olds.values():
-        migrated = run(make_keydoor(), cfg, [0, 1], old, progress=False, resume=True)
-        assert _strip_timing(migrated) == expected
+    assert resumed["finetune"]["baseline"] == [True, True]
 
 
 @pytest.mark.parametrize("go_on", [True, False])

@@ -43,8 +43,9 @@ def test_importing_and_making_builtin_tasks_compiles_nothing():
 
 
 def _checkpoint(out: Path, stage: int = 0, chunks: int = 0) -> Path:
-    """A checkpoint that a default ``smjax train TASK --resume out`` accepts as its own
-    (arrays stand in for the trainer's: nothing gets as far as loading them)."""
+    """A checkpoint of a default ``smjax train TASK --resume out``'s run, its host state
+    without counters (refused as damaged unless an earlier check refuses it) and arrays
+    that stand in for the trainer's: nothing gets as far as loading them."""
     identity = run_identity(TASK, resolve_config(), [0], {})
     host = {"stage": [stage], "started": [False], "levels": [], "curves": [], "finetune": {},
             "compile_seconds": 0.0, "wall_seconds": 0.0, "chunks": chunks}
@@ -63,7 +64,8 @@ def _flip_a_byte(step: Path) -> None:
 
 @pytest.mark.parametrize("damage, needle", [
     (dict(flip=True), "step-1 in"), (dict(stage=99), "stage 99 is outside the plan"),
-    (dict(chunks=-5), "chunks = -5 is not a count")])
+    (dict(chunks=-5), "chunks = -5 is not a count"),
+    (dict(), "is damaged: its host state lacks the counter episodes")])
 def test_a_damaged_checkpoint_is_refused_before_compiling(tmp_path, capsys, damage, needle):
     step = _checkpoint(tmp_path / "r", damage.get("stage", 0), damage.get("chunks", 0))
     if damage.get("flip"):

@@ -1,6 +1,7 @@
 """Checkpoint and resume: a run killed with SIGKILL mid-level and resumed gives the same
 results as an uninterrupted run, and so does one lost right after a level-boundary
-checkpoint; a different config is refused, naming the fields."""
+checkpoint; a different config is refused, naming the fields, and a checkpoint of
+another format than this smjax's, naming both formats."""
 import json
 import os
 import signal
@@ -9,9 +10,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from _helpers import MachineLost, lose_machine_after_save
+from _helpers import MachineLost, cli_answer, lose_machine_after_save, with_format
 from hier_env import make_keydoor
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
@@ -98,16 +100,10 @@ def test_a_level_boundary_checkpoint_holds_the_next_level_and_resumes_exactly(tm
         assert host["episodes"][s] == 0 and host["env_steps"][s] == 0
         assert host["levels"][0]["episodes"][s] == straight["levels"][0]["episodes"][s]
     # settings that do not change results are not part of the run's identity: a resume may
-    # change them, also of a checkpoint written before they left it (edited to look like one)
-    latest = ckpt.checkpoint_dir(out) / "latest.json"
-    index = json.loads(latest.read_text())
-    assert "checkpoint_every" not in index["meta"]["run"]
-    assert index["meta"].pop("settings") == {"tensorboard": False, "checkpoint_every": 1e9}
-    index["meta"]["run"] |= {"tensorboard": False, "checkpoint_every": 1e9}
-    # (a checkpoint of that time had no manifest: format 4)
-    index["meta"]["format"] = 4
-    (latest.parent / index["path"] / "smjax-manifest.json").unlink()
-    latest.write_text(json.dumps(index))
+    # change them
+    meta = ckpt.load_meta(out)["meta"]
+    assert "checkpoint_every" not in meta["run"] and "tensorboard" not in meta["run"]
+    assert meta["settings"] == {"tensorboard": False, "checkpoint_every": 1e9}
     changed = cfg.replace(tensorboard=True, checkpoint_every=1e8)
     resumed = run(make_keydoor(), changed, [0, 1], out, progress=False, resume=True)
     assert _strip_timing(resumed) | {"config": None} == _strip_timing(straight) | {"config": None}
@@ -129,43 +125,55 @@ def test_arrays_of_another_layout_are_refused_as_such_not_as_corrupt(tmp_path):
     assert float(restored["b"].sum()) == 2.0  # the same layout still restores
 
 
-def test_a_checkpoint_from_before_a_new_config_field_resumes_unless_it_differs(monkeypatch):
-    # a checkpoint written before ``level_side_cost_weight`` existed lacks it: it takes the
-    # default (which keeps the older behaviour), so the run resumes; a real difference in
-    # any field is still refused, by name
+def test_a_config_field_missing_from_a_checkpoint_compares_as_its_default(monkeypatch):
+    # every field is compared: one the checkpoint's identity lacks as its default, so the
+    # run resumes at the default and a value other than the default is refused, by name
     from smjax.train.run import check_resumable, run_identity
 
     cfg = TrainConfig(**CFG)
     identity = run_identity("keydoor", cfg, [0, 1], {})
-    old = {k: v for k, v in identity.items() if k != "level_side_cost_weight"}
-    monkeypatch.setattr(ckpt, "shared_meta", lambda out, step=None: {"meta": {"run": old}})
-    assert check_resumable("some/dir", identity)
-    changed = run_identity("keydoor", cfg.replace(level_side_cost_weight=1.0), [0, 1], {})
-    with pytest.raises(ConfigError, match="level_side_cost_weight: checkpoint 0.0 vs now 1.0"):
-        check_resumable("some/dir", changed)
-    # a field whose default changed what runs do (fine-tuning turns that keep their
-    # episodes): a checkpoint without it ran the old way, so it resumes only that way
-    old = {k: v for k, v in identity.items() if k != "finetune_continue_episodes"}
-    monkeypatch.setattr(ckpt, "shared_meta", lambda out, step=None: {"meta": {"run": old}})
-    with pytest.raises(ConfigError, match="finetune_continue_episodes: checkpoint False vs now True"):
-        check_resumable("some/dir", identity)
-    legacy = run_identity("keydoor", cfg.replace(finetune_continue_episodes=False), [0, 1], {})
-    assert check_resumable("some/dir", legacy)
+    info = {"path": "step-1", "meta": {"format": ckpt.CHECKPOINT_FORMAT, "host": {}, "run": {}}}
+    monkeypatch.setattr(ckpt, "shared_meta", lambda out, step=None: info)
+    for field, other in (("level_side_cost_weight", 1.0), ("finetune_continue_episodes", False),
+                         ("finetune_mode", "turns")):
+        info["meta"]["run"] = {k: v for k, v in identity.items() if k != field}
+        assert check_resumable("some/dir", identity)
+        changed = run_identity("keydoor", cfg.replace(**{field: other}), [0, 1], {})
+        with pytest.raises(ConfigError, match=f"{field}: checkpoint {identity[field]!r} vs "
+                                              f"now {other!r}"):
+            check_resumable("some/dir", changed)
 
 
-def test_checkpoint_formats_this_smjax_cannot_read_are_refused_by_name(tmp_path):
-    # format 2 (windows as host lists) is migrated on restore (test_finetune resumes one);
-    # older ones and newer ones are refused, saying which
-    from smjax.train.hooks import CHECKPOINT_FORMAT
+def test_checkpoint_formats_this_smjax_cannot_read_are_refused_by_name(tmp_path, capsys):
+    # this smjax resumes its own format alone: an older one (none recorded: format 1) or a
+    # newer one is refused before anything compiles, in one line naming the directory, both
+    # formats and what to do
+    from smjax.train.state import TrainerState
 
-    host = {"finetune": {}}
-    for version in range(2, CHECKPOINT_FORMAT + 1):
-        assert ckpt.check_format(tmp_path, {"format": version, "host": host}, 2,
-                                 CHECKPOINT_FORMAT) == version
-    for meta, which in (({"host": host}, "an older"), ({"format": 2, "host": {}}, "an older"),
-                        ({"format": CHECKPOINT_FORMAT + 1, "host": host}, "a newer")):
-        with pytest.raises(ckpt.CheckpointError, match=f"written by {which} smjax"):
-            ckpt.check_format(tmp_path, meta, 2, CHECKPOINT_FORMAT)
+    root = ckpt.checkpoint_dir(tmp_path)
+    ckpt.check_format(tmp_path, {"path": "step-1", "meta": {"format": ckpt.CHECKPOINT_FORMAT}})
+    host = TrainerState.new([], 1).to_json()
+    meta = {"run": {"task": "craft/get_wood", "seeds": [0], "env_overrides": {}}, "host": host,
+            "settings": {}, "format": ckpt.CHECKPOINT_FORMAT}
+    ckpt.save_checkpoint(tmp_path, 1, {"a": np.zeros(3, np.float32)}, meta)
+    for version, which in ((None, "1, written by an older"), (2, "2, written by an older"),
+                           (4, "4, written by an older"),
+                           (ckpt.CHECKPOINT_FORMAT + 1, f"{ckpt.CHECKPOINT_FORMAT + 1}, "
+                                                        f"written by a newer")):
+        with_format(tmp_path, version)
+        said = (f"checkpoint step-1 in {root} is of format {which} smjax; this smjax resumes "
+                f"format {ckpt.CHECKPOINT_FORMAT} only: resume it with the smjax version that "
+                f"wrote it, or train again in another directory")
+        with pytest.raises(ckpt.CheckpointError) as refused:
+            ckpt.shared_meta(tmp_path)
+        assert str(refused.value) == said
+        code, err = cli_answer(["train", "craft/get_wood", "--quiet", "--resume", str(tmp_path)],
+                               capsys)
+        assert code == 2 and said in err and len(err.strip().splitlines()) == 1, err
+    # (the latest step's, also where it is read from its manifest alone)
+    (root / ckpt.LATEST).unlink()
+    with pytest.raises(ckpt.CheckpointError, match="is of format 6"):
+        ckpt.shared_meta(tmp_path, "step-1")
 
 
 @pytest.mark.parametrize("failing", ["build_results", "write_results"])

@@ -16,7 +16,9 @@ instant, a full disk and a write error:
 
 Every step carries a manifest (``smjax.train.manifest``: its host state and the sha256 of
 its files), which a resume verifies; a step can be resumed from its manifest alone (no
-``latest.json``, or ``step=`` naming an older step: ``--resume-from``).
+``latest.json``, or ``step=`` naming an older step: ``--resume-from``). A resume reads
+``CHECKPOINT_FORMAT`` alone: a checkpoint of another format is refused before its fields are
+read (``load_meta``), so it never resumes into a trainer laid out for other arrays.
 
 A save that fails (read-only or full file system, I/O error) raises ``CheckpointError``
 at once, in one line: the folder is probed first, orbax creates the step directory in the
@@ -50,6 +52,11 @@ from smjax.train.outdir import probe_file
 from smjax.core.files import atomic_write_text, fsync_dir
 
 LATEST = "latest.json"
+# the format of the checkpoints this smjax writes, and the only one it resumes: the arrays of
+# ``smjax.train.state.TrainArrays`` by leaf position, the host state of
+# ``TrainerState.to_json`` and a manifest of checksums in every step (``meta["format"]``; a
+# checkpoint without the field is of format 1)
+CHECKPOINT_FORMAT = 5
 
 
 class CheckpointError(RuntimeError):
@@ -168,9 +175,12 @@ def save_checkpoint(out_dir: str | Path, step: int, arrays: Any, meta: dict) -> 
 def load_meta(out_dir: str | Path, step: str | None = None, complete: bool = False) -> dict | None:
     """``latest.json``'s content, or ``step``'s (a step name: its manifest), or, without
     ``latest.json``, the newest step's with a readable manifest (None when there is
-    none); a damaged one (a field of the wrong type; with ``complete``, also a field a
-    resume needs that is missing) is refused in one line naming the file and field."""
+    none). With ``complete`` (a resume reads it) one of another format is refused first
+    (``check_format``); a damaged one (a field of the wrong type; with ``complete``, also a
+    field a resume needs that is missing) is refused in one line naming the file and field."""
     info, source = _find_meta(checkpoint_dir(out_dir), step)
+    if info is not None and complete:
+        check_format(out_dir, info)
     problem = None if info is None else mf.check_meta(info["meta"], complete)
     if problem is not None:
         raise CheckpointError(f"{source} is damaged: its field {problem!r} is missing or of the "
@@ -232,8 +242,8 @@ def verify_step(out_dir: str | Path, info: dict) -> None:
     root = checkpoint_dir(out_dir)
     manifest = mf.read_manifest(root / info["path"])
     problem = "it has no manifest" if manifest is None else mf.damage(root / info["path"], manifest)
-    if problem is None or (manifest is None and info["meta"].get("format", 1) < 5):
-        return  # intact, or of format 4 or older, whose steps carry no manifest
+    if problem is None:
+        return
     others = [p.name for p in mf.steps_newest_first(root) if p.name != info["path"]]
     offer = (f"resume the previous step with --resume-from {others[0]}" if others else
              "no other step is kept: start again with --overwrite")
@@ -241,23 +251,34 @@ def verify_step(out_dir: str | Path, info: dict) -> None:
 
 
 def shared_meta(out_dir: str | Path, step: str | None = None) -> dict | None:
-    """``load_meta`` as process 0 sees it, on every process (collective when several)."""
+    """``load_meta`` as a resume reads it (``complete``), as process 0 sees it, on every
+    process (collective when several; its refusal is raised by every process alike)."""
     if not dist.is_multiprocess():
         return load_meta(out_dir, step, complete=True)
-    return dist.broadcast_json(load_meta(out_dir, step, complete=True) if dist.is_writer() else None)
+    info, error = None, None
+    if dist.is_writer():
+        try:
+            info = load_meta(out_dir, step, complete=True)
+        except CheckpointError as err:
+            error = str(err)
+    info, error = dist.broadcast_json([info, error])
+    if error:
+        raise CheckpointError(error)
+    return info
 
 
-def check_format(out_dir: str | Path, meta: dict, oldest: int, newest: int) -> int:
-    """The checkpoint's format (``meta["format"]``), if this smjax reads it; else a
-    ``CheckpointError`` saying whether it is too old or too new."""
-    version = meta.get("format", 1)
-    if "finetune" in meta["host"] and oldest <= version <= newest:
-        return version
-    which = ("a newer smjax" if version > newest else
-             "an older smjax (before learner states carried their hyper-parameters)")
-    raise CheckpointError(f"the checkpoint in {checkpoint_dir(out_dir)} was written by {which} "
-                          f"(format {version}; this one reads {oldest} to {newest}); it cannot "
-                          f"be resumed by this one")
+def check_format(out_dir: str | Path, info: dict) -> None:
+    """Refuse a checkpoint (``info``: ``load_meta``'s) of another format than
+    ``CHECKPOINT_FORMAT``, naming its directory, its format and the one this smjax reads."""
+    version = info["meta"].get("format", 1)
+    if version == CHECKPOINT_FORMAT:
+        return
+    newer = type(version) is int and version > CHECKPOINT_FORMAT
+    raise CheckpointError(
+        f"checkpoint {info['path']} in {checkpoint_dir(out_dir)} is of format {version!r}, "
+        f"written by {'a newer' if newer else 'an older'} smjax; this smjax resumes format "
+        f"{CHECKPOINT_FORMAT} only: resume it with the smjax version that wrote it, or train "
+        f"again in another directory")
 
 
 def load_arrays(out_dir: str | Path, like: Any, step: str | None = None,
@@ -284,9 +305,8 @@ def load_arrays(out_dir: str | Path, like: Any, step: str | None = None,
         if "structure" in said and "match" in said:  # intact, but laid out by other code
             raise CheckpointError(
                 f"checkpoint data in {path} holds other arrays than this smjax's trainer has "
-                f"(it was written by another smjax version, e.g. a DQN run from before DQN's "
-                f"exploration and target settings became sweepable); resume it with the smjax "
-                f"version that wrote it, or train again in another directory") from None
+                f"(another smjax version wrote it); resume it with the smjax version that "
+                f"wrote it, or train again in another directory") from None
         raise CheckpointError(f"checkpoint data in {path} cannot be read ({first_line(err)}); "
                               f"it is truncated or corrupt: restore it or start again with "
                               f"--overwrite") from None

@@ -27,12 +27,6 @@ from smjax.train.restorable import check_restorable
 from smjax.train.stages import Scalar, SeedStatus
 from smjax.train.state import TrainArrays, TrainerState
 
-# what a checkpoint of each format holds: 2: learner states with their hyper-parameters
-# (state.hp), the success windows as host lists; 3: the success windows as arrays; 4: also
-# the levels' bank (fine-tuning hands back the better hierarchy); 5: format 4's arrays and
-# host state, and a manifest of checksums in every step
-CHECKPOINT_FORMAT = 5
-
 
 @dataclass(frozen=True)
 class ChunkReport:
@@ -135,7 +129,7 @@ class CheckpointHook(Hook):
         began = time.perf_counter()
         # trained: every stage is done, so a resume only evaluates and writes results
         meta = {"host": trainer.state.to_json(), "run": self.run_meta,
-                "settings": self.settings, "format": CHECKPOINT_FORMAT,
+                "settings": self.settings, "format": ckpt.CHECKPOINT_FORMAT,
                 "trained": not trainer.training()}
         arrays = dist.gather(trainer.arrays) if dist.is_multiprocess() else trainer.arrays
         if dist.is_writer():
@@ -144,28 +138,22 @@ class CheckpointHook(Hook):
         self.last_write_seconds = self.last_save - began
         self.wrote_once, self.stage_pending = True, False
 
-    def load(self, like: TrainArrays, num_stages: int, window_slots: int,
-             step: str | None = None, checked: tuple[dict, int] | None = None
-             ) -> tuple[TrainArrays, TrainerState] | None:
-        """Process 0's checkpoint (its latest, or ``step``; older formats migrated),
-        verified against its manifest and the plan, the same on every process; ``like``:
-        the run's fresh arrays; ``checked``: ``check_restorable``'s answer where the caller
-        has it. None: no checkpoint."""
+    def load(self, like: TrainArrays, num_stages: int, step: str | None = None,
+             checked: dict | None = None) -> tuple[TrainArrays, TrainerState] | None:
+        """Process 0's checkpoint (its latest, or ``step``), verified against its format,
+        its manifest and the plan, the same on every process; ``like``: the run's fresh
+        arrays, which a checkpoint of this format holds leaf for leaf; ``checked``:
+        ``check_restorable``'s answer where the caller has it. None: no checkpoint."""
         out_dir = self.out_dir
         if checked is None:
-            checked = check_restorable(out_dir, step, like.keys.shape[0], num_stages,
-                                       CHECKPOINT_FORMAT)
+            checked = check_restorable(out_dir, step, like.keys.shape[0], num_stages)
         if checked is None:
             return None
-        info, version = checked
-        host = info["meta"]["host"]
-        stored = like.as_stored(version)
         if dist.is_multiprocess():
-            stored = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), stored)
+            stored = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), like)
             loaded = (ckpt.load_arrays(out_dir, stored, step, verified=True)
                       if dist.is_writer() else stored)
-            loaded = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
+            arrays = jax.tree.map(jnp.asarray, dist.broadcast(loaded))
         else:
-            loaded = ckpt.load_arrays(out_dir, stored, step, verified=True)
-        arrays = loaded.migrated(host, window_slots, levels_bank=like.levels_bank is not None)
-        return arrays, TrainerState.from_json(host)
+            arrays = ckpt.load_arrays(out_dir, like, step, verified=True)
+        return arrays, TrainerState.from_json(checked["meta"]["host"])

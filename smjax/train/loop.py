@@ -104,13 +104,12 @@ class HierarchyTrainer:
     def arrays(self) -> TrainArrays:
         return self.slots.arrays
 
-    def restore(self, step: str | None = None, checked: tuple[dict, int] | None = None) -> bool:
+    def restore(self, step: str | None = None, checked: dict | None = None) -> bool:
         """Resume from the checkpoint hook's checkpoint (its latest, or ``step``); False
         where there is none. ``checked``: what ``check_restorable`` returned for it, where
         the caller checked it before building this trainer (its files are hashed once)."""
         saver = next((h for h in self.hooks if isinstance(h, CheckpointHook)), None)
-        loaded = saver and saver.load(self.arrays, self.num_stages, self.cfg.window_slots,
-                                      step, checked)
+        loaded = saver and saver.load(self.arrays, self.num_stages, step, checked)
         if not loaded:
             return False
         arrays, self.state = loaded

@@ -80,8 +80,7 @@ def _finetune_summary(record: dict | None, config: dict) -> dict | None:
     of its plateau blocks, final_success before it, its turns (joint: one); where
     no gate passed, the fine-tuned hierarchy's check (``check_success``) and which one the
     phase handed back (``kept``: "fine-tuned" or "levels", the better of the two;
-    ``baseline`` False: the phase started in a checkpoint without the levels' bank, format
-    3 or older)."""
+    ``baseline``: the levels' bank was kept when the phase started, to compare with)."""
     if record is None:
         return None
     return {

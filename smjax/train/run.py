@@ -15,7 +15,7 @@ from smjax.train import distributed as dist
 from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig, config_differences
 from smjax.train.engine import Engine, make_learner
 from smjax.options.hierarchy import Hierarchy
-from smjax.train.hooks import CHECKPOINT_FORMAT, Hook, ResultsReport
+from smjax.train.hooks import Hook, ResultsReport
 from smjax.train.loop import HierarchyTrainer, NonFiniteError, default_hooks
 from smjax.train.program_cache import cacheable_identity
 from smjax.policy.artifact import policy_meta
@@ -51,12 +51,6 @@ def run_identity(task_name: str, cfg: TrainConfig, seeds: list[int], env_overrid
     return json.loads(json.dumps(identity))
 
 
-# config fields whose default differs from the value a checkpoint without the field ran
-# with: such a checkpoint resumes with this value (a resume at the default is refused, by name)
-LEGACY_VALUES = {"finetune_continue_episodes": False, "finetune_mode": "turns",
-                 "finetune_plateau_episodes": 0}
-
-
 # evaluation-only settings: a resume of a trained run (every stage done) may change them,
 # e.g. fewer ticks, where an evaluation with the saved ones cannot finish
 EVAL_SETTINGS = ("eval_envs", "eval_max_ticks")
@@ -72,12 +66,11 @@ def check_resumable(out_dir, identity: dict, step: str | None = None) -> bool:
 
 
 def _refuse_another_run(out_dir, info: dict, identity: dict) -> None:
-    """Refuse the checkpoint ``info`` (``ckpt.shared_meta``) where it is not of this run."""
-    # a config field the checkpoint lacks takes its default, which computes what the
-    # checkpoint's run computed, or, where it does not, the value that run used
-    # (``LEGACY_VALUES``)
-    saved = TrainConfig().to_dict() | LEGACY_VALUES | info["meta"]["run"]
-    # (a checkpoint's identity may hold RUN_SETTINGS too: they never count as a difference)
+    """Refuse the checkpoint ``info`` (``ckpt.shared_meta``: of this smjax's format) where
+    it is not of this run; every config field is compared, one the checkpoint's identity
+    lacks as its default."""
+    saved = TrainConfig().to_dict() | info["meta"]["run"]
+    # (the defaults hold RUN_SETTINGS, which no identity holds: they never count as a difference)
     free = RUN_SETTINGS + (EVAL_SETTINGS if info["meta"].get("trained") else ())
     diff = [k for k in config_differences(saved, identity) if k not in free]
     if diff:
@@ -176,8 +169,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
     slot_seeds, hp, configs = (slot_layout(cfg, points, seeds) if points is not None
                                else (seeds, None, None))
     # the checkpoint's files and host state, checked before the trainer compiles anything
-    checked = (check_restorable(out_dir, resume_from, len(slot_seeds), resolved.num_stages,
-                                CHECKPOINT_FORMAT) if resume else None)
+    checked = (check_restorable(out_dir, resume_from, len(slot_seeds), resolved.num_stages)
+               if resume else None)
     with TIMELINE.span("memory check, engine and trainer"):
         check_fits(env, env_params, cfg, len(slot_seeds))
         engine = Engine(env, env_params, resolved.hierarchy, agent, cfg)

@@ -4,12 +4,10 @@
 bank and which options are learned). ``TrainerState`` is the host state the loop decides
 with: per seed its stage, the counters of the level (or fine-tuning turn) it trains
 (``LevelCounters``) and of fine-tuning (``FinetuneCounters``), and the run's records
-(results.json's levels, the curves). Both are stored in the layout of checkpoint formats
-4 and 5 (the host state as JSON with one list over seeds per counter; the arrays by leaf
-position). Format 3 has no levels' bank (``TrainArrays.levels_bank``, the last leaves)
-nor the keep-the-better counters; format 2 also holds the running-success windows in the
-host JSON (``history``, ``task_history``), not as arrays (``SuccessWindow``). Both are
-migrated on restore (``TrainArrays.migrated``, ``TrainerState.from_json``).
+(results.json's levels, the curves). Both are stored in the layout of
+``checkpoint.CHECKPOINT_FORMAT``, the only one a resume reads: the host state as JSON with
+one list over seeds per counter (``TrainerState.to_json``, read back whole by
+``from_json``), the arrays by leaf position.
 
 The running-success windows are ring buffers on the device, updated inside the compiled
 chunk after every update; the chunk returns, per update, which batches form the window
@@ -50,22 +48,6 @@ class SuccessWindow:
         """``TrainArrays``' two windows, empty."""
         return {"window": cls.empty(num_seeds, slots), "task_window": cls.empty(num_seeds, slots)}
 
-    @classmethod
-    def from_lists(cls, histories: list[list], slots: int) -> "SuccessWindow":
-        """Windows holding these host lists of ``[total, count]`` batches, oldest first
-        (what checkpoint format 2 stores as ``history``/``task_history``: already trimmed
-        to the batches the window needs, so at most ``slots`` of them)."""
-        total = np.zeros((len(histories), slots), np.float32)
-        count = np.zeros((len(histories), slots), np.int32)
-        nxt = np.zeros((len(histories),), np.int32)
-        for s, history in enumerate(histories):
-            batches = history[-slots:]
-            for i, (t, c) in enumerate(batches):
-                # format 2's totals are float32 sums stored as Python floats: exact in float32
-                total[s, i], count[s, i] = t, c
-            nxt[s] = len(batches) % slots
-        return cls(total=jnp.asarray(total), count=jnp.asarray(count), next=jnp.asarray(nxt))
-
     def push(self, total: jax.Array, count: jax.Array, size: jax.Array):
         """Add a batch of ``count`` episodes (none: nothing added) whose successes sum to
         ``total``; returns the window and, over the most recent whole batches that hold at
@@ -74,10 +56,9 @@ class SuccessWindow:
 
         The sum is left to the host (``_Counters._count``): it adds these float32 totals
         in float64, newest first, and divides, so the running success, and every decision
-        on it, is the same to the last bit as the mean of a host list of the batches
-        (format 2's windows). A float32 sum on the device is exact only for integer batch
-        totals, and successes are not always 0/1 (e.g. craft's make_stick F_o): it would
-        move the curves' last digits."""
+        on it, is the same to the last bit as the mean of a host list of the batches. A
+        float32 sum on the device is exact only for integer batch totals, and successes are
+        not always 0/1 (e.g. craft's make_stick F_o): it would move the curves' last digits."""
         K = self.count.shape[-1]
         add = count > 0
         at = self.next
@@ -97,9 +78,8 @@ class SuccessWindow:
 @struct.dataclass
 class TrainArrays:
     """The device state, per seed (leading axis). A checkpoint stores the leaves by
-    position, so the fields are in the order the formats add them: format 2 holds the
-    first four, format 3 adds the windows, format 4 the levels' bank; an older format's
-    leaves are a prefix of a newer one's."""
+    position: the fields' order is the checkpoint's layout (``CHECKPOINT_FORMAT``), and a
+    field of None (no fine-tuning, no joint fine-tuning) stores no leaves."""
     bank: Any      # the policy bank: params [S, num_options, ...]
     keys: jax.Array
     learned: jax.Array  # [S, num_options] bool
@@ -108,32 +88,8 @@ class TrainArrays:
     task_window: Any = None  # SuccessWindow: fine-tuning's whole-task episodes, all turns
     levels_bank: Any = None  # the bank as the levels left it (fine-tuning may hand it back)
     # joint fine-tuning's engine.SeedState (a learner per option: [S, O, ...]; None unless
-    # TrainConfig.finetune_mode is "joint"; its leaves come last, so a checkpoint without
-    # them is a prefix)
+    # TrainConfig.finetune_mode is "joint")
     joint: Any = None
-
-    def as_stored(self, version: int) -> "TrainArrays":
-        """The arrays a checkpoint of this format holds (format 2: no windows; 3: no
-        levels' bank)."""
-        if version >= 4:
-            return self
-        if version == 3:
-            return self.replace(levels_bank=None)
-        return self.replace(window=None, task_window=None, levels_bank=None)
-
-    def migrated(self, host: dict, slots: int, levels_bank: bool = False) -> "TrainArrays":
-        """Arrays restored from a checkpoint with ``host`` state: a format-2 one (no window
-        arrays) gets its windows from its host lists; where the trainer keeps a levels' bank
-        (``levels_bank``: fine-tuning is on), a format-2 or 3 one gets the bank as it is (a
-        seed already fine-tuning then has no baseline: ``FinetuneCounters.baseline``)."""
-        out = self
-        if out.window is None:
-            out = out.replace(window=SuccessWindow.from_lists(host["history"], slots),
-                              task_window=SuccessWindow.from_lists(
-                                  host["finetune"]["task_history"], slots))
-        if levels_bank and out.levels_bank is None:
-            out = out.replace(levels_bank=out.bank)
-        return out
 
 
 class _Counters:
@@ -211,9 +167,8 @@ class FinetuneCounters(_Counters):
     turns: list = field(default_factory=list)  # [{"template", "episodes", "running_success"}]
     # where the gate never passed: the fine-tuned hierarchy's success on fresh episodes at
     # the phase's end, and which bank the phase handed back ("fine-tuned" or "levels": the
-    # better of the two); baseline: the levels' bank was kept when the phase started
-    # (False where the phase started in a checkpoint of format 3 or older, which holds no
-    # levels' bank)
+    # better of the two); baseline: the levels' bank was kept when the phase started (what
+    # keep_better compares the fine-tuned hierarchy with)
     check_success: float | None = None
     kept: str | None = None
     baseline: bool = False
@@ -292,8 +247,7 @@ class TrainerState:
         """Record seed ``s``'s level in its results entry; on to its next stage."""
         record, counters = self.levels[self.stage[s]], self.level[s]
         for name, key in RECORD_KEYS.items():
-            # (a level record of a format 2 to 4 checkpoint may lack gate_uncalled)
-            record.setdefault(name, [None] * len(self.stage))[s] = getattr(counters, key)
+            record[name][s] = getattr(counters, key)
         self.stage[s] += 1
         self.started[s] = False
 
@@ -302,8 +256,8 @@ class TrainerState:
         return {k: [getattr(c, k) for c in self.finetune] for k in FINETUNE_KEYS}
 
     def to_json(self) -> dict:
-        """The checkpoint's host state (format 4: format 2's layout without the windows,
-        with the keep-the-better counters)."""
+        """The checkpoint's host state: per counter a list over seeds (fine-tuning's under
+        ``finetune``), the records and the totals."""
         return {"stage": self.stage, "started": self.started, "levels": self.levels,
                 "curves": self.curves, "finetune": self.finetune_record(),
                 "compile_seconds": self.compile_seconds, "wall_seconds": self.wall_seconds,
@@ -312,15 +266,28 @@ class TrainerState:
 
     @classmethod
     def from_json(cls, host: dict) -> "TrainerState":
-        """From format 4's host state, or format 3's, or format 2's (its windows,
-        ``history`` and ``task_history``, are left to ``SuccessWindow.from_lists``)."""
+        """From ``to_json``'s host state, which holds every counter (a resume checks it
+        first: ``missing_counter``)."""
         seeds = range(len(host["stage"]))
-        ft = host["finetune"]  # format 3 and older lack the keep-the-better counters
+        ft = host["finetune"]
         return cls(stage=list(host["stage"]), started=list(host["started"]),
-                   level=[LevelCounters(**{k: host[k][s] for k in LEVEL_KEYS if k in host})
-                          for s in seeds],
-                   finetune=[FinetuneCounters(**{k: ft[k][s] for k in FINETUNE_KEYS if k in ft})
+                   level=[LevelCounters(**{k: host[k][s] for k in LEVEL_KEYS}) for s in seeds],
+                   finetune=[FinetuneCounters(**{k: ft[k][s] for k in FINETUNE_KEYS})
                              for s in seeds],
                    levels=host["levels"], curves=host["curves"],
                    compile_seconds=host["compile_seconds"], wall_seconds=host["wall_seconds"],
                    chunks=host["chunks"])
+
+
+def missing_counter(host: dict, num_seeds: int) -> str | None:
+    """Which counter or level record of a checkpoint's host state ``TrainerState.from_json``
+    would miss (every one ``to_json`` writes, over ``num_seeds`` seeds); None: none."""
+    ft = host.get("finetune") or {}
+    lists = ([(k, host.get(k)) for k in ("started",) + LEVEL_KEYS]
+             + [(f"finetune {k}", ft.get(k)) for k in FINETUNE_KEYS]
+             + [(f"levels[{i}] {k}", rec.get(k)) for i, rec in enumerate(host.get("levels", []))
+                for k in RECORD_KEYS])
+    for name, value in lists:
+        if not isinstance(value, list) or len(value) != num_seeds:
+            return f"its host state lacks the counter {name} (a list over its {num_seeds} seeds)"
+    return None
