@@ -17,10 +17,13 @@ medians are printed, with the ratio to the first variant.
 
     python benchmarks/joint_update_cost.py --task craft/get_gem --env observation=compact \
         --seeds 2 --repeats 7
+    python benchmarks/joint_update_cost.py --algo actor-critic --task craft/make_goldarrow \
+        --env observation=compact --seeds 1 --skip-chunk
 """
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
 
@@ -35,7 +38,7 @@ def build(args, agent_cfg: dict):
     from smjax.train.plans import resolve_hierarchy
 
     env, params = smjax.make(args.task, **dict(kv.split("=", 1) for kv in args.env))
-    cfg = TrainConfig(num_envs=args.num_envs, rollout_ticks=args.rollout_ticks,
+    cfg = TrainConfig(algo=args.algo, num_envs=args.num_envs, rollout_ticks=args.rollout_ticks,
                       updates_per_chunk=args.updates, agent=agent_cfg)
     _, h = resolve_hierarchy(env, cfg)
     agent = make_learner(env, params, cfg)
@@ -71,7 +74,7 @@ def record_rollout(engine, state, learned):
 
 
 def update_variants(engine, plain_agent):
-    """The three joint updates, each ``(learners [O], pending [O, B], traj, key) -> params``."""
+    """The joint updates (grouped: where the agent has one), each ``(learners [O], pending [O, B], traj, key) -> params``."""
     from smjax.agents.option_batch import each_option, joint_batch
     from smjax.agents.smdp import carry_pending
     from smjax.options.joint import OPTION_AXES
@@ -90,8 +93,10 @@ def update_variants(engine, plain_agent):
             return update_options(learners, batch, key)[0].params
         return run
 
-    return {"vmap": vmapped, "each_option": batched(each_option(plain_agent.update)),
-            "grouped": batched(engine.agent.update_options)}
+    variants = {"vmap": vmapped, "each_option": batched(each_option(plain_agent.update))}
+    if engine.agent.update_options is not None:
+        variants["grouped"] = batched(engine.agent.update_options)
+    return variants
 
 
 def timed(fn, make_args, out: dict, name: str) -> None:
@@ -108,17 +113,25 @@ def timed(fn, make_args, out: dict, name: str) -> None:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--algo", default="ppo", help="ppo, actor-critic or dqn")
     ap.add_argument("--task", default="craft/get_gem")
     ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--agent", action="append", default=[], metavar="KEY=JSON",
+                    help="a learner config field, e.g. normalize_advantages=true")
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--num-envs", type=int, default=128)
     ap.add_argument("--rollout-ticks", type=int, default=32)
     ap.add_argument("--updates", type=int, default=4, help="updates (rollouts) per chunk")
-    ap.add_argument("--block", type=int, default=None, help="PPO option_block (default: its own)")
+    ap.add_argument("--block", type=int, default=None,
+                    help="option_block of PPO or the actor-critic (default: its own)")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--skip-chunk", action="store_true")
     args = ap.parse_args(argv)
-    agent_cfg = {} if args.block is None else {"option_block": args.block}
+    agent_cfg = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.agent)}
+    if args.block is not None:
+        agent_cfg["option_block"] = args.block
+    if args.algo != "dqn":  # the grouped update, whatever "auto" picks on this backend
+        agent_cfg["option_update"] = "grouped"
     engine, plain = build(args, agent_cfg)
     S, O = args.seeds, engine.h.num_options
     state = joint_state(engine, S)
@@ -160,7 +173,7 @@ def report(out: dict, args) -> None:
         print(f"{name:18s} median {med:8.3f} s of {len(rec['runs'])} (first call with compile "
               f"{rec['first_s']:.1f} s); {med / ref_med:.2f}x of {ref}, "
               f"{ref_med / med:.2f}x faster", flush=True)
-    print(f"task {args.task} {args.env} seeds {args.seeds} envs {args.num_envs} ticks "
+    print(f"{args.algo} {args.agent} task {args.task} {args.env} seeds {args.seeds} envs {args.num_envs} ticks "
           f"{args.rollout_ticks} updates/chunk {args.updates} on "
           f"{jax.devices()[0].platform}", flush=True)
 
