@@ -74,7 +74,8 @@ def record_rollout(engine, state, learned):
 
 
 def update_variants(engine, plain_agent):
-    """The joint updates (grouped: where the agent has one), each ``(learners [O], pending [O, B], traj, key) -> params``."""
+    """The joint updates (grouped: where the agent has one), each ``(learners [O],
+    pending [O, B], traj, key) -> learners``."""
     from smjax.agents.option_batch import each_option, joint_batch
     from smjax.agents.smdp import carry_pending
     from smjax.options.joint import OPTION_AXES
@@ -85,12 +86,12 @@ def update_variants(engine, plain_agent):
             return plain_agent.update(learner, tr, k)[0]
 
         keys = jax.random.split(key, engine.h.num_options)
-        return jax.vmap(one, (0, 0, OPTION_AXES, 0))(learners, pending, traj, keys).params
+        return jax.vmap(one, (0, 0, OPTION_AXES, 0))(learners, pending, traj, keys)
 
     def batched(update_options):
         def run(learners, pending, traj, key):
             batch, _ = joint_batch(pending, traj)
-            return update_options(learners, batch, key)[0].params
+            return update_options(learners, batch, key)[0]
         return run
 
     variants = {"vmap": vmapped, "each_option": batched(each_option(plain_agent.update))}
@@ -101,7 +102,7 @@ def update_variants(engine, plain_agent):
 
 def timed(fn, make_args, out: dict, name: str) -> None:
     """One call of ``fn`` on fresh arguments; the first call (compile included) apart."""
-    args = make_args()
+    args = jax.block_until_ready(make_args())
     t0 = time.perf_counter()
     jax.block_until_ready(fn(*args))
     seconds = time.perf_counter() - t0
@@ -141,7 +142,9 @@ def main(argv=None) -> None:
           f"of {args.rollout_ticks} x {args.num_envs} ticks", flush=True)
     pending = state.carry.pending
     key = jax.random.split(jax.random.PRNGKey(5), S)
-    progs = {name: jax.jit(jax.vmap(fn)) for name, fn in update_variants(engine, plain).items()}
+    # the learners donated, as the trainer's chunk does (a DQN buffer is written in place)
+    progs = {name: jax.jit(jax.vmap(fn), donate_argnums=0)
+             for name, fn in update_variants(engine, plain).items()}
     chunks = {}
     if not args.skip_chunk:
         from smjax.train.engine import Engine
@@ -156,7 +159,8 @@ def main(argv=None) -> None:
     out: dict = {}
     for _ in range(args.repeats + 1):  # the first round compiles
         for name, prog in progs.items():
-            timed(prog, lambda: (state.learner, pending, traj, key), out, name)
+            timed(prog, lambda: (jax.tree.map(jnp.copy, state.learner), pending, traj, key),
+                  out, name)
         for name, (eng, rest) in chunks.items():  # (the chunk consumes its state: a copy)
             timed(lambda st, *r, e=eng: e.joint_chunk(st, *r)[1],
                   lambda: (jax.tree.map(jnp.copy, state),) + rest, out, name)

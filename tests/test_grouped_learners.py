@@ -1,6 +1,6 @@
-"""The actor-critic's learner per option updated at the price of one
-(``actor_critic_options``): the same result as each option's own update, each option
-from its own decisions only."""
+"""The actor-critic's and DQN's learners per option updated at once
+(``actor_critic_options``, ``dqn_options``): the same result as each option's own
+update, each option from its own decisions only."""
 import chex
 import jax
 import jax.numpy as jnp
@@ -48,9 +48,10 @@ def _states(agent, seed: int):
     keys = jax.random.split(jax.random.PRNGKey(seed + 200), O)
     states = jax.tree.map(lambda *x: jnp.stack(x), *[agent.init(k, jnp.zeros((F,)), A)
                                                      for k in keys])
-    scale = jnp.asarray([1.0, 3.0, 0.5, 2.0])
-    return states.replace(hp=dict(states.hp, learning_rate=states.hp["learning_rate"] * scale,
-                                  vf_coef=states.hp["vf_coef"] * scale[::-1]))
+    scale = {"learning_rate": jnp.asarray([1.0, 3.0, 0.5, 2.0]),
+             "vf_coef": jnp.asarray([2.0, 0.5, 3.0, 1.0]),
+             "reward_scale": jnp.asarray([1.0, 0.5, 2.0, 1.5])}
+    return states.replace(hp={k: v * scale.get(k, 1.0) for k, v in states.hp.items()})
 
 
 def _close(a, b, **tol):
@@ -58,8 +59,8 @@ def _close(a, b, **tol):
         np.testing.assert_allclose(np.asarray(x), np.asarray(y), **tol)
 
 
-def _agent(**config):
-    return make_agent("actor-critic", hidden_sizes=(16,), option_update="grouped", **config)
+def _agent(algo="actor-critic", **config):
+    return make_agent(algo, hidden_sizes=(16,), option_update="grouped", **config)
 
 
 CONFIGS = {
@@ -96,22 +97,32 @@ def test_the_grouped_update_equals_each_options_update(name, block):
            rtol=0, atol=0)
 
 
-def test_each_option_learns_only_from_its_own_decisions():
-    # the others' decisions, rewards and pending rows changed: option 0 and option 3 end
-    # exactly where they did; the changed options do not
-    agent = _agent(option_block=4, normalize_advantages=True)
-    states, key = _states(agent, 0), jax.random.PRNGKey(0)
-    mine = jnp.asarray([True, False, False, True])
+def _changed_elsewhere(mine):
+    """The batch, and one whose options outside ``mine`` have other decisions, rewards and
+    pending rows (the shared observations stay)."""
     traj, other = _record(0), _record(1, rates=(0.2, 0.6, 0.5, 0.1))
     changed = jax.tree.map(lambda a, b: jnp.where(mine.reshape((O,) + (1,) * (a.ndim - 3)), a, b),
                            traj._replace(obs=None), other._replace(obs=None))
-    changed = changed._replace(obs=traj.obs)  # the shared observations stay
     pending, other_pending = _pending(0), _pending(1)
     changed_pending = jax.tree.map(lambda a, b: jnp.where(
         mine.reshape((O,) + (1,) * (a.ndim - 1)), a, b), pending, other_pending)
+    return (joint_batch(pending, traj)[0],
+            joint_batch(changed_pending, changed._replace(obs=traj.obs))[0])
+
+
+@pytest.mark.parametrize("algo", ["actor-critic", "dqn"])
+def test_each_option_learns_only_from_its_own_decisions(algo):
+    # the others' decisions, rewards and pending rows changed: options 0 and 3 end exactly
+    # where they did; a changed option does not
+    config = (dict(option_block=4, normalize_advantages=True) if algo == "actor-critic"
+              else DQN_SMALL)
+    agent = _agent(algo, **config)
+    states, key = _states(agent, 0), jax.random.PRNGKey(0)
+    mine = jnp.asarray([True, False, False, True])
+    batch, changed = _changed_elsewhere(mine)
     update = jax.jit(agent.update_options)
-    new, _ = update(states, joint_batch(pending, traj)[0], key)
-    new_changed, _ = update(states, joint_batch(changed_pending, changed)[0], key)
+    new, _ = update(states, batch, key)
+    new_changed, _ = update(states, changed, key)
     kept = lambda tree: jax.tree.map(lambda x: np.asarray(x)[np.asarray(mine)], tree)  # noqa: E731
     _close(kept(new_changed), kept(new), rtol=0, atol=0)
     moved = jax.tree.map(lambda a, b: np.abs(np.asarray(a[1]) - np.asarray(b[1])).max(),
@@ -119,11 +130,48 @@ def test_each_option_learns_only_from_its_own_decisions():
     assert max(jax.tree.leaves(moved)) > 0
 
 
-def test_the_grouped_update_is_chosen_by_backend_unless_named():
-    assert _agent().update_options is not None
-    per_option = make_agent("actor-critic", option_update="per_option")
-    assert per_option.update_options is None
+# a buffer smaller than option 0's decisions of one rollout (the oldest are dropped), that
+# wraps around; steps from the first update on
+DQN_SMALL = dict(buffer_capacity=40, batch_size=8, learning_starts=10,
+                 gradient_steps_per_update=3, target_update_period=2)
+
+
+@pytest.mark.parametrize("config", [DQN_SMALL, dict(DQN_SMALL, double_dqn=False, tau=0.5,
+                                                    reward_scale=0.3, buffer_capacity=300)])
+def test_the_grouped_dqn_update_equals_each_options_update(config):
+    # two updates in a row: the same buffers (rows copied, to the bit), parameters, target
+    # networks, optimiser states, counters and metrics as update() option by option
+    agent = _agent("dqn", **config)
+    states = _states(agent, 5)
+    states = states.replace(buffer=states.buffer.replace(
+        insert_pos=jnp.asarray([0, 5, 39, 17], jnp.int32) % config["buffer_capacity"]))
+    grouped, alone = states, states
+    for r, seed in enumerate((5, 6)):
+        batch, key = joint_batch(_pending(seed), _record(seed))[0], jax.random.PRNGKey(r)
+        grouped, g_metrics = jax.jit(agent.update_options)(grouped, batch, key)
+        alone, a_metrics = jax.jit(each_option(agent.update))(alone, batch, key)
+        chex.assert_trees_all_equal_shapes_and_dtypes(grouped, alone)
+        chex.assert_tree_all_finite((grouped.params, grouped.opt_state, g_metrics))
+        _close(grouped.buffer, alone.buffer, rtol=0, atol=0)
+        _close(grouped, alone, rtol=2e-5, atol=1e-6)
+        assert g_metrics.keys() == a_metrics.keys()
+        _close([g_metrics[k] for k in sorted(a_metrics)], [a_metrics[k] for k in sorted(a_metrics)],
+               rtol=2e-5, atol=1e-6)
+    decisions = np.asarray(a_metrics["decisions"])
+    assert decisions[IDLE] == 0 and decisions[0] > 4 * decisions[1] > 0
+    assert (np.asarray(alone.grad_steps)[[0, 3]] == 6).all()  # both updates stepped
+
+
+@pytest.mark.parametrize("algo", ["actor-critic", "dqn"])
+def test_the_grouped_update_is_chosen_by_backend_unless_named(algo):
+    assert _agent(algo).update_options is not None
+    assert make_agent(algo, option_update="per_option").update_options is None
+    # auto: grouped on a CPU (the tests' backend), per option on an accelerator
+    assert (make_agent(algo).update_options is not None) == (jax.default_backend() == "cpu")
     with pytest.raises(ValueError, match="option_update"):
-        make_agent("actor-critic", option_update="sometimes")
+        make_agent(algo, option_update="sometimes")
+
+
+def test_the_actor_critic_refuses_an_empty_block():
     with pytest.raises(ValueError, match="option_block"):
         make_agent("actor-critic", option_block=0)
