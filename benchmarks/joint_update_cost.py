@@ -8,9 +8,14 @@ its own learner), and times, as compiled, seed-vmapped programs on the same inpu
 * ``update``: one joint update, three ways: ``vmap`` (each option's ``carry_pending`` and
   ``update`` over its rows, mapped over the options with ``OPTION_AXES``: the update
   before ``update_options`` existed), ``each_option`` (the fallback of an agent without
-  ``update_options``) and ``grouped`` (the agent's ``update_options``);
+  ``update_options``) and ``grouped`` (the agent's ``update_options``, ``option_update``
+  "grouped"); the learners are donated and come back whole, as in the trainer's chunk
+  (a DQN buffer is then written in place);
 * ``chunk``: ``Engine.joint_chunk`` as the trainer calls it (rollouts + updates), for an
   agent without ``update_options`` and with it.
+
+``--algo`` picks the learner (ppo, actor-critic, dqn), ``--agent KEY=JSON`` sets a field
+of its config.
 
 The variants alternate within every repeat, so a noisy (shared) machine hits each alike;
 medians are printed, with the ratio to the first variant.

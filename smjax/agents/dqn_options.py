@@ -15,7 +15,8 @@ only where the rows are written.
 Why no loop over blocks of each option's decisions, as PPO's and the actor-critic's
 grouped updates have: the loop would carry the buffers, and under ``vmap`` (seeds) a
 loop whose trip count differs between seeds selects its whole carry on every turn, a
-copy of every buffer per block. The gather and write here are of fixed shape.
+copy of every buffer per block (on 2 CPU cores, 2 seeds of 6 options: ~50x the time of
+the write here). The gather and write here are of fixed shape.
 """
 from __future__ import annotations
 
