@@ -8,19 +8,27 @@ its own learner), and times, as compiled, seed-vmapped programs on the same inpu
 * ``update``: one joint update, three ways: ``vmap`` (each option's ``carry_pending`` and
   ``update`` over its rows, mapped over the options with ``OPTION_AXES``: the update
   before ``update_options`` existed), ``each_option`` (the fallback of an agent without
-  ``update_options``) and ``grouped`` (the agent's ``update_options``);
+  ``update_options``) and ``grouped`` (the agent's ``update_options``, ``option_update``
+  "grouped"); the learners are donated and come back whole, as in the trainer's chunk
+  (a DQN buffer is then written in place);
 * ``chunk``: ``Engine.joint_chunk`` as the trainer calls it (rollouts + updates), for an
   agent without ``update_options`` and with it.
+
+``--algo`` picks the learner (ppo, actor-critic, dqn), ``--agent KEY=JSON`` sets a field
+of its config.
 
 The variants alternate within every repeat, so a noisy (shared) machine hits each alike;
 medians are printed, with the ratio to the first variant.
 
     python benchmarks/joint_update_cost.py --task craft/get_gem --env observation=compact \
         --seeds 2 --repeats 7
+    python benchmarks/joint_update_cost.py --algo actor-critic --task craft/make_goldarrow \
+        --env observation=compact --seeds 1 --skip-chunk
 """
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
 
@@ -35,7 +43,7 @@ def build(args, agent_cfg: dict):
     from smjax.train.plans import resolve_hierarchy
 
     env, params = smjax.make(args.task, **dict(kv.split("=", 1) for kv in args.env))
-    cfg = TrainConfig(num_envs=args.num_envs, rollout_ticks=args.rollout_ticks,
+    cfg = TrainConfig(algo=args.algo, num_envs=args.num_envs, rollout_ticks=args.rollout_ticks,
                       updates_per_chunk=args.updates, agent=agent_cfg)
     _, h = resolve_hierarchy(env, cfg)
     agent = make_learner(env, params, cfg)
@@ -71,7 +79,8 @@ def record_rollout(engine, state, learned):
 
 
 def update_variants(engine, plain_agent):
-    """The three joint updates, each ``(learners [O], pending [O, B], traj, key) -> params``."""
+    """The joint updates (grouped: where the agent has one), each ``(learners [O],
+    pending [O, B], traj, key) -> learners``."""
     from smjax.agents.option_batch import each_option, joint_batch
     from smjax.agents.smdp import carry_pending
     from smjax.options.joint import OPTION_AXES
@@ -82,21 +91,23 @@ def update_variants(engine, plain_agent):
             return plain_agent.update(learner, tr, k)[0]
 
         keys = jax.random.split(key, engine.h.num_options)
-        return jax.vmap(one, (0, 0, OPTION_AXES, 0))(learners, pending, traj, keys).params
+        return jax.vmap(one, (0, 0, OPTION_AXES, 0))(learners, pending, traj, keys)
 
     def batched(update_options):
         def run(learners, pending, traj, key):
             batch, _ = joint_batch(pending, traj)
-            return update_options(learners, batch, key)[0].params
+            return update_options(learners, batch, key)[0]
         return run
 
-    return {"vmap": vmapped, "each_option": batched(each_option(plain_agent.update)),
-            "grouped": batched(engine.agent.update_options)}
+    variants = {"vmap": vmapped, "each_option": batched(each_option(plain_agent.update))}
+    if engine.agent.update_options is not None:
+        variants["grouped"] = batched(engine.agent.update_options)
+    return variants
 
 
 def timed(fn, make_args, out: dict, name: str) -> None:
     """One call of ``fn`` on fresh arguments; the first call (compile included) apart."""
-    args = make_args()
+    args = jax.block_until_ready(make_args())
     t0 = time.perf_counter()
     jax.block_until_ready(fn(*args))
     seconds = time.perf_counter() - t0
@@ -108,17 +119,25 @@ def timed(fn, make_args, out: dict, name: str) -> None:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--algo", default="ppo", help="ppo, actor-critic or dqn")
     ap.add_argument("--task", default="craft/get_gem")
     ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--agent", action="append", default=[], metavar="KEY=JSON",
+                    help="a learner config field, e.g. normalize_advantages=true")
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--num-envs", type=int, default=128)
     ap.add_argument("--rollout-ticks", type=int, default=32)
     ap.add_argument("--updates", type=int, default=4, help="updates (rollouts) per chunk")
-    ap.add_argument("--block", type=int, default=None, help="PPO option_block (default: its own)")
+    ap.add_argument("--block", type=int, default=None,
+                    help="option_block of PPO or the actor-critic (default: its own)")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--skip-chunk", action="store_true")
     args = ap.parse_args(argv)
-    agent_cfg = {} if args.block is None else {"option_block": args.block}
+    agent_cfg = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.agent)}
+    if args.block is not None:
+        agent_cfg["option_block"] = args.block
+    if args.algo != "dqn":  # the grouped update, whatever "auto" picks on this backend
+        agent_cfg["option_update"] = "grouped"
     engine, plain = build(args, agent_cfg)
     S, O = args.seeds, engine.h.num_options
     state = joint_state(engine, S)
@@ -128,7 +147,9 @@ def main(argv=None) -> None:
           f"of {args.rollout_ticks} x {args.num_envs} ticks", flush=True)
     pending = state.carry.pending
     key = jax.random.split(jax.random.PRNGKey(5), S)
-    progs = {name: jax.jit(jax.vmap(fn)) for name, fn in update_variants(engine, plain).items()}
+    # the learners donated, as the trainer's chunk does (a DQN buffer is written in place)
+    progs = {name: jax.jit(jax.vmap(fn), donate_argnums=0)
+             for name, fn in update_variants(engine, plain).items()}
     chunks = {}
     if not args.skip_chunk:
         from smjax.train.engine import Engine
@@ -143,7 +164,8 @@ def main(argv=None) -> None:
     out: dict = {}
     for _ in range(args.repeats + 1):  # the first round compiles
         for name, prog in progs.items():
-            timed(prog, lambda: (state.learner, pending, traj, key), out, name)
+            timed(prog, lambda: (jax.tree.map(jnp.copy, state.learner), pending, traj, key),
+                  out, name)
         for name, (eng, rest) in chunks.items():  # (the chunk consumes its state: a copy)
             timed(lambda st, *r, e=eng: e.joint_chunk(st, *r)[1],
                   lambda: (jax.tree.map(jnp.copy, state),) + rest, out, name)
@@ -160,7 +182,7 @@ def report(out: dict, args) -> None:
         print(f"{name:18s} median {med:8.3f} s of {len(rec['runs'])} (first call with compile "
               f"{rec['first_s']:.1f} s); {med / ref_med:.2f}x of {ref}, "
               f"{ref_med / med:.2f}x faster", flush=True)
-    print(f"task {args.task} {args.env} seeds {args.seeds} envs {args.num_envs} ticks "
+    print(f"{args.algo} {args.agent} task {args.task} {args.env} seeds {args.seeds} envs {args.num_envs} ticks "
           f"{args.rollout_ticks} updates/chunk {args.updates} on "
           f"{jax.devices()[0].platform}", flush=True)
 

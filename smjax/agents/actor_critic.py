@@ -18,7 +18,6 @@ fixed), ``vf_coef * 0.5 * (G - V(s))**2``, minus ``ent_coef * entropy``.
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import jax
@@ -27,10 +26,11 @@ import numpy as np
 import optax
 
 from smjax.agents import config as checks
-from smjax.agents.base import ActOutput, Agent, Transition, hyper_params, scale_by_lr
+from smjax.agents.actor_critic_options import make_update_options
+from smjax.agents.actor_critic_update import exploration_epsilon, reinforce_update
+from smjax.agents.base import ActOutput, Agent, Transition, hyper_params
 from smjax.agents.config import static, traced
-from smjax.agents.networks import (flatten_obs, masked_entropy, masked_log_softmax, masked_mean,
-                                   take_action, torso_grids)
+from smjax.agents.networks import torso_grids
 from smjax.agents.ppo import (
     PolicyGradientState,
     init_policy_gradient_state,
@@ -38,7 +38,6 @@ from smjax.agents.ppo import (
     make_network,
     sample_actions,
 )
-from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_gae
 
 
 @dataclass(frozen=True)
@@ -61,6 +60,12 @@ class ActorCriticConfig:
     max_grad_norm: float = static(0.0)  # 0 disables clipping (the reference did not clip)
     normalize_advantages: bool = static(False)
     bootstrap_at_rollout_end: bool = static(True)
+    # how joint fine-tuning updates its learners, as PPOConfig's option_update: "grouped"
+    # (every option's one step on its own decisions, ``actor_critic_options``, in blocks
+    # of option_block rows), "per_option" (each option's update over every row, vmapped)
+    # or "auto" (benchmarks/RESULTS.md, "The cost of a joint update")
+    option_update: str = static("auto")
+    option_block: int = static(128)
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -73,11 +78,10 @@ class ActorCriticConfig:
         checks.check_range(self, "vf_coef", 0.0)
         checks.check_range(self, "ent_coef", 0.0)
         checks.check_range(self, "max_grad_norm", 0.0)
+        checks.check_choice(self, "option_update", ("auto", "grouped", "per_option"))
+        checks.check_positive_int(self, "option_block")
 
 
-def exploration_epsilon(config: ActorCriticConfig, episodes_seen: jax.Array) -> jax.Array:
-    decayed = jnp.exp(-config.epsilon_decay * episodes_seen.astype(jnp.float32))
-    return jnp.maximum(decayed, config.epsilon_min)
 
 
 def make_agent(config: ActorCriticConfig | None = None, layout=()) -> Agent:
@@ -114,67 +118,8 @@ def make_agent(config: ActorCriticConfig | None = None, layout=()) -> Agent:
         seen = jnp.asarray(np.iinfo(np.int32).max // 2, jnp.int32)
         return state.replace(params=params, episodes_seen=seen)
 
-    return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start)
-
-
-def reinforce_loss(config: ActorCriticConfig, network_for, params, obs, action, mask, returns,
-                   weight, hp):
-    """(total loss, its terms) over the decisions ``weight`` marks (see the module docstring)."""
-    logits, value = network_for(mask.shape[-1]).apply(params, obs)
-    log_prob = take_action(masked_log_softmax(logits, mask), action)
-    advantage = jax.lax.stop_gradient(returns - value)
-    if config.normalize_advantages:
-        mean = masked_mean(advantage, weight)
-        std = jnp.sqrt(masked_mean(jnp.square(advantage - mean), weight))
-        advantage = (advantage - mean) / (std + 1e-8)
-    policy_loss = masked_mean(-log_prob * advantage, weight)
-    value_loss = 0.5 * masked_mean(jnp.square(value - returns), weight)
-    entropy = masked_mean(masked_entropy(logits, mask), weight)
-    total = policy_loss + hp["vf_coef"] * value_loss - hp["ent_coef"] * entropy
-    return total, {"policy_loss": policy_loss, "value_loss": value_loss, "entropy": entropy}
-
-
-def reinforce_update(config: ActorCriticConfig, network_for, optimizer,
-                     state: PolicyGradientState, traj: Transition):
-    """One gradient step on the rollout's complete decisions: (new state, metrics)."""
-    traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
-    num_ticks, num_envs = traj.reward.shape[:2]
-    decision = traj.decision.astype(bool)
-    _, returns = smdp_gae(traj.reward, traj.discount, traj.done, decision,
-                          jnp.where(decision, traj.value, 0.0), 1.0,
-                          bootstrap=config.bootstrap_at_rollout_end)
-    episodes = episodes_with_decision(traj.done, decision)
-    decision = complete_decisions(traj.done, decision)
-    num_items = num_ticks * num_envs
-    obs = flatten_obs(traj.obs, batch_dims=2).reshape(num_items, -1)
-    action = jnp.where(decision, traj.action, 0).reshape(num_items).astype(jnp.int32)
-    mask = traj.action_mask.reshape(num_items, -1).astype(bool)
-    weight = decision.reshape(num_items)
-    loss_fn = functools.partial(reinforce_loss, config, network_for)
-    (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(
-        state.params, obs, action, mask, returns.reshape(num_items), weight, state.hp)
-    updates, new_opt_state = optimizer.update(grads, state.opt_state, state.params)
-    updates = scale_by_lr(updates, state.hp["learning_rate"])
-    new_params = optax.apply_updates(state.params, updates)
-    # With no decision in the rollout there is nothing to learn; do not let Adam's
-    # moments drift on a zero gradient.
-    has_decision = jnp.any(decision)
-    params, opt_state = jax.tree.map(
-        lambda n, o: jnp.where(has_decision, n, o),
-        (new_params, new_opt_state), (state.params, state.opt_state))
-    num_decisions = decision.sum().astype(jnp.int32)
-    new_state = PolicyGradientState(
-        params=params,
-        opt_state=opt_state,
-        grad_steps=state.grad_steps + has_decision.astype(jnp.int32),
-        updates=state.updates + 1,
-        episodes_seen=state.episodes_seen + episodes,
-        decisions_seen=state.decisions_seen + num_decisions,
-        hp=state.hp,
-    )
-    metrics = dict(aux, total_loss=total, decisions=num_decisions,
-                   mean_return=masked_mean(returns, decision),
-                   episodes_seen=new_state.episodes_seen,
-                   epsilon=exploration_epsilon(config, new_state.episodes_seen),
-                   grad_steps=new_state.grad_steps)
-    return new_state, metrics
+    grouped = config.option_update == "grouped" or (
+        config.option_update == "auto" and jax.default_backend() == "cpu")
+    return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start,
+                 update_options=make_update_options(
+                     config, network_for, optimizer, config.option_block) if grouped else None)

@@ -39,7 +39,8 @@ from smjax.agents.networks import (
     torso_grids,
     uniform_allowed_probs,
 )
-from smjax.agents.smdp import episodes_with_decision, smdp_transitions
+from smjax.agents.dqn_options import make_update_options
+from smjax.agents.dqn_update import ReplayBuffer, dqn_update, empty_buffer, linear_epsilon
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,11 @@ class DQNConfig:
     huber_loss: bool = static(True)
     max_grad_norm: float = static(10.0)
     reward_scale: float = traced(1.0)  # rewards are multiplied by this before the TD target
+    # how joint fine-tuning updates its learners, as PPOConfig's option_update: "grouped"
+    # (``dqn_options``: the rollout stored by row index, the same buffers and steps),
+    # "per_option" (each option's update over every row, vmapped) or "auto" (grouped on
+    # a CPU, where it is measured faster: benchmarks/RESULTS.md, "The cost of a joint update")
+    option_update: str = static("auto")
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -85,19 +91,7 @@ class DQNConfig:
         checks.check_range(self, "epsilon_end", 0.0, 1.0)
         checks.check_choice(self, "epsilon_schedule_unit", ("decisions", "gradient_steps"))
         checks.check_range(self, "max_grad_norm", 0.0, low_open=True)
-
-
-@flax.struct.dataclass
-class ReplayBuffer:
-    obs: jax.Array          # [C, *obs_shape], the observation dtype
-    action: jax.Array       # [C] int32
-    reward: jax.Array       # [C] SMDP reward sum
-    discount: jax.Array     # [C] product of the tick discounts until the next decision
-    terminal: jax.Array     # [C] bool
-    next_obs: jax.Array     # [C, *obs_shape]
-    next_mask: jax.Array    # [C, A] bool
-    size: jax.Array         # int32 scalar
-    insert_pos: jax.Array   # int32 scalar, next slot to write
+        checks.check_choice(self, "option_update", ("auto", "grouped", "per_option"))
 
 
 @flax.struct.dataclass
@@ -113,36 +107,6 @@ class DQNState:
     hp: Any = flax.struct.field(default_factory=dict)  # the config's traced fields (base.py)
 
 
-def linear_epsilon(config: DQNConfig, hp: dict, grad_steps: jax.Array,
-                   decisions_seen: jax.Array) -> jax.Array:
-    progress = grad_steps if config.epsilon_schedule_unit == "gradient_steps" else decisions_seen
-    frac = jnp.clip(progress.astype(jnp.float32) / hp["epsilon_decay_steps"], 0.0, 1.0)
-    return config.epsilon_start + frac * (hp["epsilon_end"] - config.epsilon_start)
-
-
-def insert(buffer: ReplayBuffer, items: dict, valid: jax.Array) -> ReplayBuffer:
-    """Write the ``valid`` rows of ``items`` (leading axis N) at the circular write position.
-
-    With more valid rows than capacity only the last ``capacity`` are kept, so every write
-    position is distinct and the result does not depend on scatter order.
-    """
-    capacity = buffer.action.shape[0]
-    valid = valid.astype(bool)
-    rank = jnp.cumsum(valid.astype(jnp.int32)) - 1
-    count = valid.sum().astype(jnp.int32)
-    keep = jnp.logical_and(valid, rank >= count - capacity)
-    pos = jnp.where(keep, (buffer.insert_pos + rank) % capacity, capacity)  # capacity = dropped
-    written = {
-        name: getattr(buffer, name).at[pos].set(value.astype(getattr(buffer, name).dtype), mode="drop")
-        for name, value in items.items()
-    }
-    return buffer.replace(
-        **written,
-        size=jnp.minimum(buffer.size + count, capacity),
-        insert_pos=(buffer.insert_pos + count) % capacity,
-    )
-
-
 def smdp_td_targets(q_next_online, q_next_target, reward, discount, terminal, next_mask, double_dqn):
     """``R + D * (1 - terminal) * Q_target(s', a*)`` with a* the best allowed next action."""
     if double_dqn:
@@ -152,18 +116,6 @@ def smdp_td_targets(q_next_online, q_next_target, reward, discount, terminal, ne
     q_next = take_action(q_next_target, best)
     q_next = jnp.where(jnp.any(next_mask, axis=-1), q_next, 0.0)
     return reward + discount * (1.0 - terminal.astype(jnp.float32)) * q_next
-
-
-def empty_buffer(capacity: int, example_obs: jax.Array, num_actions: int) -> ReplayBuffer:
-    """A replay buffer of ``capacity`` zero rows, every next action allowed."""
-    obs_buf = jnp.zeros((capacity,) + example_obs.shape, example_obs.dtype)
-    return ReplayBuffer(
-        obs=obs_buf, action=jnp.zeros((capacity,), jnp.int32),
-        reward=jnp.zeros((capacity,), jnp.float32), discount=jnp.zeros((capacity,), jnp.float32),
-        terminal=jnp.zeros((capacity,), bool), next_obs=obs_buf,
-        next_mask=jnp.ones((capacity, int(num_actions)), bool),
-        size=jnp.zeros((), jnp.int32), insert_pos=jnp.zeros((), jnp.int32),
-    )
 
 
 def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
@@ -201,9 +153,10 @@ def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
         value = jnp.max(masked_logits(q, mask), axis=-1)
         return ActOutput(action, log_prob, value)
 
+    step = functools.partial(gradient_step, config, optimizer,
+                             functools.partial(td_loss, config, q_values))
+
     def update(state: DQNState, traj: Transition, key: jax.Array):
-        loss_fn = functools.partial(td_loss, config, q_values)
-        step = functools.partial(gradient_step, config, optimizer, loss_fn)
         return dqn_update(config, step, state, traj, key)
 
     def policy_logits(params, obs: jax.Array) -> jax.Array:
@@ -215,7 +168,10 @@ def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
         return state.replace(params=params, target_params=params, decisions_seen=seen,
                              grad_steps=jnp.maximum(state.grad_steps, seen))
 
-    return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start)
+    grouped = config.option_update == "grouped" or (
+        config.option_update == "auto" and jax.default_backend() == "cpu")
+    return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start,
+                 update_options=make_update_options(config, step) if grouped else None)
 
 
 def td_loss(config: DQNConfig, q_values, params, target_params, batch):
@@ -261,38 +217,3 @@ def gradient_step(config: DQNConfig, optimizer, loss_fn, state: DQNState, key: j
     metrics = {"loss": loss, "mean_q": mean_q, "td_error_abs": td_abs,
                "stepped": ready.astype(jnp.float32)}
     return new_state, metrics
-
-
-def dqn_update(config: DQNConfig, step, state: DQNState, traj: Transition, key: jax.Array):
-    """Store the rollout's complete decisions, then ``gradient_steps_per_update`` ``step``s."""
-    traj = jax.tree.map(jnp.asarray, traj)  # numpy inputs too
-    num_ticks, num_envs = traj.reward.shape[:2]
-    num_items = num_ticks * num_envs
-    decision = traj.decision.astype(bool)
-    tr = smdp_transitions(traj.reward, traj.discount, traj.done, decision,
-                          traj.obs, traj.action_mask)
-    flat = lambda x: x.reshape((num_items,) + x.shape[2:])  # noqa: E731
-    items = {"obs": flat(traj.obs), "action": flat(traj.action),
-             "reward": flat(tr.reward) * state.hp["reward_scale"], "discount": flat(tr.discount),
-             "terminal": flat(tr.terminal), "next_obs": flat(tr.next_obs),
-             "next_mask": flat(tr.next_mask)}
-    num_decisions = tr.valid.sum().astype(jnp.int32)  # each counted once, when complete
-    state = state.replace(
-        buffer=insert(state.buffer, items, flat(tr.valid)),
-        decisions_seen=state.decisions_seen + num_decisions,
-        episodes_seen=state.episodes_seen + episodes_with_decision(traj.done, decision),
-        updates=state.updates + 1,
-    )
-    keys = jax.random.split(key, config.gradient_steps_per_update)
-    state, step_metrics = jax.lax.scan(step, state, keys)
-    stepped = step_metrics.pop("stepped")
-    denom = jnp.maximum(stepped.sum(), 1.0)
-    metrics = {name: jnp.sum(v * stepped) / denom for name, v in step_metrics.items()}
-    metrics.update(
-        decisions=num_decisions,
-        buffer_size=state.buffer.size,
-        epsilon=linear_epsilon(config, state.hp, state.grad_steps, state.decisions_seen),
-        episodes_seen=state.episodes_seen,
-        grad_steps=state.grad_steps,
-    )
-    return state, metrics
