@@ -241,7 +241,8 @@ def verify_step(out_dir: str | Path, info: dict) -> None:
     """Refuse a step whose files differ from its manifest, naming it and what else is kept."""
     root = checkpoint_dir(out_dir)
     manifest = mf.read_manifest(root / info["path"])
-    problem = "it has no manifest" if manifest is None else mf.damage(root / info["path"], manifest)
+    problem = ("its manifest is missing or unreadable" if manifest is None
+               else mf.damage(root / info["path"], manifest))
     if problem is None:
         return
     others = [p.name for p in mf.steps_newest_first(root) if p.name != info["path"]]
