@@ -39,7 +39,8 @@ import jax.numpy as jnp
 def build(args, agent_cfg: dict):
     import smjax
     from smjax.train.config import TrainConfig
-    from smjax.train.engine import Engine, make_learner
+    from smjax.train.engine import Engine
+    from smjax.train.learner import make_learner
     from smjax.train.plans import resolve_hierarchy
 
     env, params = smjax.make(args.task, **dict(kv.split("=", 1) for kv in args.env))

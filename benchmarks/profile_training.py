@@ -64,7 +64,8 @@ def dense_flops(params) -> int:
 def build(args):
     import smjax
     from smjax.train.config import TrainConfig
-    from smjax.train.engine import Engine, SeedState, make_learner
+    from smjax.train.engine import Engine, SeedState
+    from smjax.train.learner import make_learner
     from smjax.train.plans import plan_levels, resolve_hierarchy
 
     overrides = dict(kv.split("=", 1) for kv in args.env)

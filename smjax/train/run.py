@@ -13,7 +13,8 @@ from smjax.core.timeline import TIMELINE
 from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
 from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig, config_differences
-from smjax.train.engine import Engine, make_learner
+from smjax.train.engine import Engine
+from smjax.train.learner import make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.hooks import Hook, ResultsReport
 from smjax.train.loop import HierarchyTrainer, NonFiniteError, default_hooks
