@@ -78,3 +78,30 @@ def cli_answer(argv, capsys, *, compiles: bool = False) -> tuple[int, str]:
     assert "Traceback" not in err and "internal error" not in err, err
     assert compiles or _COMPILES[0] == before, f"compiled before answering: {err}"
     return code, err
+
+
+def pending_rows(seed: int, num_options: int, num_envs: int, features: int, actions: int,
+                 idle: int):
+    """Every option's pending rows ``[O, B]`` of a joint batch: decisions still running
+    (random), none for option ``idle``."""
+    import jax.numpy as jnp
+
+    from smjax.core.transition import no_pending
+
+    k = jax.random.split(jax.random.PRNGKey(seed + 100), 3)
+    shape = (num_options, num_envs)
+    rows = jax.tree.map(lambda x: jnp.repeat(x[None], num_options, 0),
+                        no_pending(jnp.zeros((num_envs, features)), actions))
+    return rows._replace(
+        obs=jax.random.normal(k[0], shape + (features,)),
+        decision=jax.random.bernoulli(k[1], 0.5, shape).at[idle].set(False),
+        reward=jax.random.uniform(k[2], shape), discount=jnp.full(shape, 0.9, jnp.float32))
+
+
+def assert_trees_close(a, b, **tol) -> None:
+    """Every leaf of ``a`` close to the same leaf of ``b`` (same structure)."""
+    import numpy as np
+
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), **tol)
+

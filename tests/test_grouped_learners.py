@@ -9,7 +9,8 @@ import pytest
 
 from smjax.agents import make_agent
 from smjax.agents.option_batch import each_option, joint_batch
-from smjax.core.transition import Transition, no_pending
+from smjax.core.transition import Transition
+from _helpers import assert_trees_close, pending_rows
 
 T, B, A, F = 9, 6, 5, 7
 # decision rates of the options: many, few, none at all, some
@@ -33,14 +34,10 @@ def _record(seed: int, rates=RATES) -> Transition:
         done=jax.random.bernoulli(k[5], 0.1, (T, B, O)))
 
 
+
+
 def _pending(seed: int) -> Transition:
-    """Every option's pending rows [O, B]: decisions still running, none for IDLE."""
-    k = jax.random.split(jax.random.PRNGKey(seed + 100), 3)
-    rows = jax.tree.map(lambda x: jnp.repeat(x[None], O, 0), no_pending(jnp.zeros((B, F)), A))
-    return rows._replace(
-        obs=jax.random.normal(k[0], (O, B, F)),
-        decision=jax.random.bernoulli(k[1], 0.5, (O, B)).at[IDLE].set(False),
-        reward=jax.random.uniform(k[2], (O, B)), discount=jnp.full((O, B), 0.9, jnp.float32))
+    return pending_rows(seed, O, B, F, A, IDLE)
 
 
 def _states(agent, seed: int):
@@ -54,9 +51,6 @@ def _states(agent, seed: int):
     return states.replace(hp={k: v * scale.get(k, 1.0) for k, v in states.hp.items()})
 
 
-def _close(a, b, **tol):
-    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
-        np.testing.assert_allclose(np.asarray(x), np.asarray(y), **tol)
 
 
 def _agent(algo="actor-critic", **config):
@@ -85,7 +79,7 @@ def test_the_grouped_update_equals_each_options_update(name, block):
     assert decisions[IDLE] == 0 and decisions[0] > 4 * decisions[1] > 0  # uneven counts
     chex.assert_trees_all_equal_shapes_and_dtypes(grouped, alone)
     chex.assert_tree_all_finite((grouped.params, grouped.opt_state, g_metrics))
-    _close(grouped, alone, rtol=2e-4, atol=2e-6)
+    assert_trees_close(grouped, alone, rtol=2e-4, atol=2e-6)
     assert g_metrics.keys() == a_metrics.keys()
     for metric in a_metrics:
         chex.assert_equal_shape([g_metrics[metric], a_metrics[metric]])
@@ -93,7 +87,7 @@ def test_the_grouped_update_equals_each_options_update(name, block):
                                    rtol=2e-4, atol=2e-6, err_msg=metric)
     np.testing.assert_array_equal(np.asarray(grouped.grad_steps), decisions > 0)
     idle = lambda tree: jax.tree.map(lambda x: np.asarray(x[IDLE]), tree)  # noqa: E731
-    _close(idle((grouped.params, grouped.opt_state)), idle((states.params, states.opt_state)),
+    assert_trees_close(idle((grouped.params, grouped.opt_state)), idle((states.params, states.opt_state)),
            rtol=0, atol=0)
 
 
@@ -124,7 +118,7 @@ def test_each_option_learns_only_from_its_own_decisions(algo):
     new, _ = update(states, batch, key)
     new_changed, _ = update(states, changed, key)
     kept = lambda tree: jax.tree.map(lambda x: np.asarray(x)[np.asarray(mine)], tree)  # noqa: E731
-    _close(kept(new_changed), kept(new), rtol=0, atol=0)
+    assert_trees_close(kept(new_changed), kept(new), rtol=0, atol=0)
     moved = jax.tree.map(lambda a, b: np.abs(np.asarray(a[1]) - np.asarray(b[1])).max(),
                          new.params, new_changed.params)
     assert max(jax.tree.leaves(moved)) > 0
@@ -152,10 +146,10 @@ def test_the_grouped_dqn_update_equals_each_options_update(config):
         alone, a_metrics = jax.jit(each_option(agent.update))(alone, batch, key)
         chex.assert_trees_all_equal_shapes_and_dtypes(grouped, alone)
         chex.assert_tree_all_finite((grouped.params, grouped.opt_state, g_metrics))
-        _close(grouped.buffer, alone.buffer, rtol=0, atol=0)
-        _close(grouped, alone, rtol=2e-5, atol=1e-6)
+        assert_trees_close(grouped.buffer, alone.buffer, rtol=0, atol=0)
+        assert_trees_close(grouped, alone, rtol=2e-5, atol=1e-6)
         assert g_metrics.keys() == a_metrics.keys()
-        _close([g_metrics[k] for k in sorted(a_metrics)], [a_metrics[k] for k in sorted(a_metrics)],
+        assert_trees_close([g_metrics[k] for k in sorted(a_metrics)], [a_metrics[k] for k in sorted(a_metrics)],
                rtol=2e-5, atol=1e-6)
     decisions = np.asarray(a_metrics["decisions"])
     assert decisions[IDLE] == 0 and decisions[0] > 4 * decisions[1] > 0

@@ -9,8 +9,9 @@ from smjax.agents import make_agent
 from smjax.agents.grouped import grouped_grads
 from smjax.agents.option_batch import each_option, joint_batch
 from smjax.agents.smdp import carry_pending
-from smjax.core.transition import Transition, no_pending
+from smjax.core.transition import Transition
 from smjax.options.joint import OPTION_AXES
+from _helpers import assert_trees_close, pending_rows
 
 T, B, O, A, F = 7, 5, 4, 6, 9
 IDLE = 2  # an option with no decision in the record
@@ -31,15 +32,10 @@ def _record(seed: int) -> Transition:
         done=jax.random.bernoulli(k[5], 0.15, (T, B, O)))
 
 
+
+
 def _pending(seed: int) -> Transition:
-    """Every option's pending rows [O, B]: some decisions still running (not IDLE's)."""
-    k = jax.random.split(jax.random.PRNGKey(seed + 100), 3)
-    empty = no_pending(jnp.zeros((B, F)), A)
-    rows = jax.tree.map(lambda x: jnp.repeat(x[None], O, 0), empty)
-    return rows._replace(
-        obs=jax.random.normal(k[0], (O, B, F)),
-        decision=jax.random.bernoulli(k[1], 0.5, (O, B)).at[IDLE].set(False),
-        reward=jax.random.uniform(k[2], (O, B)), discount=jnp.full((O, B), 0.9, jnp.float32))
+    return pending_rows(seed, O, B, F, A, IDLE)
 
 
 def _states(agent, seed: int):
@@ -48,9 +44,6 @@ def _states(agent, seed: int):
                         *[agent.init(k, jnp.zeros((F,)), A) for k in keys])
 
 
-def _close(a, b, **tol):
-    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
-        np.testing.assert_allclose(np.asarray(x), np.asarray(y), **tol)
 
 
 def test_the_batch_carries_pending_rows_as_each_option_did():
@@ -59,8 +52,8 @@ def test_the_batch_carries_pending_rows_as_each_option_did():
     traj, pending = _record(0), _pending(0)
     batch, new_pending = joint_batch(pending, traj)
     want, want_pending = jax.vmap(carry_pending, (0, OPTION_AXES))(pending, traj)
-    _close(batch.traj._replace(obs=batch.observations()), want, rtol=0, atol=0)
-    _close(new_pending, want_pending, rtol=0, atol=0)
+    assert_trees_close(batch.traj._replace(obs=batch.observations()), want, rtol=0, atol=0)
+    assert_trees_close(new_pending, want_pending, rtol=0, atol=0)
 
 
 @pytest.mark.parametrize("block", [1, 3, 128])
@@ -76,7 +69,7 @@ def test_the_grouped_update_equals_each_options_update(block, seed):
     grouped, g_metrics = jax.jit(agent.update_options)(states, batch, key)
     alone, a_metrics = jax.jit(each_option(agent.update))(states, batch, key)
     assert int(a_metrics["decisions"].sum()) > 20  # the options did have decisions
-    _close(grouped, alone, rtol=2e-4, atol=2e-6)
+    assert_trees_close(grouped, alone, rtol=2e-4, atol=2e-6)
     assert g_metrics.keys() == a_metrics.keys()
     for name in a_metrics:
         np.testing.assert_allclose(np.asarray(g_metrics[name]), np.asarray(a_metrics[name]),
@@ -89,8 +82,8 @@ def test_an_option_without_decisions_keeps_its_parameters():
     states = _states(agent, 3)
     new, metrics = jax.jit(agent.update_options)(states, batch, jax.random.PRNGKey(0))
     idle = lambda tree: jax.tree.map(lambda x: np.asarray(x[IDLE]), tree)  # noqa: E731
-    _close(idle(new.params), idle(states.params), rtol=0, atol=0)
-    _close(idle(new.opt_state), idle(states.opt_state), rtol=0, atol=0)
+    assert_trees_close(idle(new.params), idle(states.params), rtol=0, atol=0)
+    assert_trees_close(idle(new.opt_state), idle(states.opt_state), rtol=0, atol=0)
     assert int(metrics["decisions"][IDLE]) == 0 and int(new.grad_steps[IDLE]) == 0
     busy = [o for o in range(O) if o != IDLE]
     assert (np.asarray(new.grad_steps)[busy] > 0).all()  # the others did step
@@ -118,7 +111,7 @@ def test_grouped_gradients_are_each_options_own():
     for block in (1, 4, 16):
         grads, sums = jax.jit(lambda p, c, b=block: grouped_grads(block_loss, p, c, b))(
             params, counts)
-        _close(grads, want, rtol=1e-5, atol=1e-6)
+        assert_trees_close(grads, want, rtol=1e-5, atol=1e-6)
         np.testing.assert_array_equal(np.asarray(sums["rows"]), np.asarray(counts))
     assert not np.asarray(grads["w"][2]).any()
 
