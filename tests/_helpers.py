@@ -105,3 +105,24 @@ def assert_trees_close(a, b, **tol) -> None:
     for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
         np.testing.assert_allclose(np.asarray(x), np.asarray(y), **tol)
 
+
+def joint_record(seed: int, dims: tuple, decide, reward_scale: float = 1.0,
+                 done_rate: float = 0.15):
+    """A random joint record ``[T, B, O]`` (observations shared) of ``dims = (T, B, O, A,
+    F)``; ``decide(key)`` draws the bool ``[T, B, O]`` decisions."""
+    import jax.numpy as jnp
+
+    from smjax.core.transition import Transition
+
+    T, B, O, A, F = dims
+    k = jax.random.split(jax.random.PRNGKey(seed), 8)
+    return Transition(
+        obs=jax.random.normal(k[0], (T, B, F)),
+        action=jax.random.randint(k[1], (T, B, O), 0, A),
+        action_mask=jax.random.bernoulli(k[6], 0.8, (T, B, O, A)).at[..., 0].set(True),
+        log_prob=-jax.random.uniform(k[7], (T, B, O), minval=0.5, maxval=2.0),
+        value=jax.random.normal(k[2], (T, B, O)), decision=decide(k[3]),
+        reward=jax.random.uniform(k[4], (T, B, O)) * reward_scale,
+        discount=jnp.full((T, B, O), 0.97, jnp.float32),
+        done=jax.random.bernoulli(k[5], done_rate, (T, B, O)))
+

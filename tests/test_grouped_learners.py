@@ -10,7 +10,7 @@ import pytest
 from smjax.agents import make_agent
 from smjax.agents.option_batch import each_option, joint_batch
 from smjax.core.transition import Transition
-from _helpers import assert_trees_close, pending_rows
+from _helpers import assert_trees_close, joint_record, pending_rows
 
 T, B, A, F = 9, 6, 5, 7
 # decision rates of the options: many, few, none at all, some
@@ -21,19 +21,9 @@ IDLE = 2
 
 def _record(seed: int, rates=RATES) -> Transition:
     """A random joint record [T, B, O] (obs shared), option o deciding at rate rates[o]."""
-    k = jax.random.split(jax.random.PRNGKey(seed), 8)
-    decision = jax.random.uniform(k[3], (T, B, O)) < jnp.asarray(rates)
-    return Transition(
-        obs=jax.random.normal(k[0], (T, B, F)),
-        action=jax.random.randint(k[1], (T, B, O), 0, A),
-        action_mask=jax.random.bernoulli(k[6], 0.8, (T, B, O, A)).at[..., 0].set(True),
-        log_prob=-jax.random.uniform(k[7], (T, B, O), minval=0.5, maxval=2.0),
-        value=jax.random.normal(k[2], (T, B, O)), decision=decision,
-        reward=jax.random.uniform(k[4], (T, B, O)) * 3.0,
-        discount=jnp.full((T, B, O), 0.97, jnp.float32),
-        done=jax.random.bernoulli(k[5], 0.1, (T, B, O)))
-
-
+    return joint_record(seed, (T, B, O, A, F),
+                        lambda k: jax.random.uniform(k, (T, B, O)) < jnp.asarray(rates),
+                        reward_scale=3.0, done_rate=0.1)
 
 
 def _pending(seed: int) -> Transition:

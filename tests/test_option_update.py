@@ -11,7 +11,7 @@ from smjax.agents.option_batch import each_option, joint_batch
 from smjax.agents.smdp import carry_pending
 from smjax.core.transition import Transition
 from smjax.options.joint import OPTION_AXES
-from _helpers import assert_trees_close, pending_rows
+from _helpers import assert_trees_close, joint_record, pending_rows
 
 T, B, O, A, F = 7, 5, 4, 6, 9
 IDLE = 2  # an option with no decision in the record
@@ -19,19 +19,8 @@ IDLE = 2  # an option with no decision in the record
 
 def _record(seed: int) -> Transition:
     """A random joint record [T, B, O] (obs shared); option IDLE never decides."""
-    k = jax.random.split(jax.random.PRNGKey(seed), 8)
-    decision = jax.random.bernoulli(k[3], 0.4, (T, B, O)).at[:, :, IDLE].set(False)
-    return Transition(
-        obs=jax.random.normal(k[0], (T, B, F)),
-        action=jax.random.randint(k[1], (T, B, O), 0, A),
-        action_mask=jax.random.bernoulli(k[6], 0.8, (T, B, O, A)).at[..., 0].set(True),
-        log_prob=-jax.random.uniform(k[7], (T, B, O), minval=0.5, maxval=2.0),
-        value=jax.random.normal(k[2], (T, B, O)), decision=decision,
-        reward=jax.random.uniform(k[4], (T, B, O)),
-        discount=jnp.full((T, B, O), 0.97, jnp.float32),
-        done=jax.random.bernoulli(k[5], 0.15, (T, B, O)))
-
-
+    return joint_record(seed, (T, B, O, A, F), lambda k: jax.random.bernoulli(
+        k, 0.4, (T, B, O)).at[:, :, IDLE].set(False))
 
 
 def _pending(seed: int) -> Transition:
