@@ -91,9 +91,9 @@ def _add_train(sub):
                         "[--sweep agent.ent_coef=0,0.01]: every point of the lists' product "
                         "trains for every seed in the same one compiled program; writes "
                         "OUT/sweep.json and OUT/point-<k>/results.json (a point's results are "
-                        "those of its run alone). Sweepable: gamma; agent.learning_rate (every "
-                        "algo); ppo: agent.gae_lambda, clip_eps, ent_coef, vf_coef, target_kl; "
-                        "actor-critic: agent.ent_coef, vf_coef")
+                        "those of its run alone). Sweepable: gamma and the fields the "
+                        "learner's config declares traced (docs/guide.md, \"Sweeps\"); "
+                        "another field is refused with the list")
     p.add_argument("--hierarchy", default=None, help="hierarchy name (see `smjax list --hierarchies`)")
     p.add_argument("--num-envs", type=int, default=None, help="parallel environments per seed")
     _add_train_budgets(p)
