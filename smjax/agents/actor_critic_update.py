@@ -14,6 +14,7 @@ from smjax.agents.base import Transition, scale_by_lr
 from smjax.agents.networks import (flatten_obs, masked_entropy, masked_log_softmax, masked_mean,
                                    take_action)
 from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_gae
+from smjax.agents.ppo_update import apply_if
 
 
 def exploration_epsilon(config, episodes_seen: jax.Array) -> jax.Array:
@@ -67,9 +68,7 @@ def gradient_step(optimizer, state, grads, has_decision: jax.Array):
     updates, new_opt_state = optimizer.update(grads, state.opt_state, state.params)
     updates = scale_by_lr(updates, state.hp["learning_rate"])
     new_params = optax.apply_updates(state.params, updates)
-    return jax.tree.map(
-        lambda n, o: jnp.where(has_decision, n, o),
-        (new_params, new_opt_state), (state.params, state.opt_state))
+    return apply_if(has_decision, (new_params, new_opt_state), (state.params, state.opt_state))
 
 
 def finish(config, state, params, opt_state, has_decision, episodes, decision, returns,

@@ -2,9 +2,8 @@
 
 A slot is one seed of one sweep point (without a sweep: one seed). ``Slots`` holds, per
 slot, its seed, its config (its sweep point's) and swept hyper-parameters, and the device
-state of all slots
-(``TrainArrays``) placed on the training mesh; the stages and the driver loop change that
-state through it.
+state of all slots (``TrainArrays``) placed on the training mesh; the stages and the driver
+loop change that state through it.
 """
 from __future__ import annotations
 

@@ -134,8 +134,8 @@ def slot_layout(cfg: TrainConfig, points: list[dict], seeds: list[int]) -> tuple
     slot_seeds = [s for _ in points for s in seeds]
     hp = {key[len(PREFIX):]: [p[key] for p in points for _ in seeds]
           for key in points[0] if key.startswith(PREFIX)}
-    configs = [c for c in map(lambda p: point_config(cfg, p), points) for _ in seeds]
-    return slot_seeds, hp, configs
+    configs = [point_config(cfg, p) for p in points]  # one per point, shared by its seeds
+    return slot_seeds, hp, [c for c in configs for _ in seeds]
 
 
 def point_config(cfg: TrainConfig, point: dict) -> TrainConfig:
