@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.train import distributed as dist
+from smjax.train.ahead import CompileAhead, resolve
 from smjax.train.engine import ChunkControls
 from smjax.train.seed_arrays import NonFiniteError, all_finite
 from smjax.train.slots import Slots
@@ -81,19 +82,30 @@ class ChunkRunner:
         slots.arrays = a.replace(state=state, window=window, task_window=task_window)
         return ChunkOut(stats, windows, metrics), compile_s
 
-    def joint(self, seeds: list[int], side_cost, gammas, sizes, describe):
-        """Joint fine-tuning's chunk for these seeds (the others keep their state)."""
+    def joint_args(self, seeds: list[int], side_cost, gammas, sizes) -> tuple:
+        """Joint fine-tuning's chunk's arguments: these seeds run, the others keep their
+        state."""
         a, slots = self.slots.arrays, self.slots
-        args = (a.joint, slots.per_seed([s in seeds for s in range(len(slots))], bool),
+        return (a.joint, slots.per_seed([s in seeds for s in range(len(slots))], bool),
                 a.learned, slots.per_seed(side_cost, jnp.float32),
                 slots.per_seed(gammas, jnp.float32), (a.window, a.task_window),
                 slots.per_seed(sizes, jnp.int32))
-        compile_s = 0.0
-        if self.joint_program is None:
-            t0 = time.perf_counter()
-            self.joint_program = self.engine.compile("joint_chunk", self.engine.joint_chunk,
-                                                     args, donate=(0,))
-            compile_s = time.perf_counter() - t0
+
+    def joint_ahead(self, ahead: CompileAhead, side_cost, gammas, sizes) -> None:
+        """Compile joint fine-tuning's chunk on ``ahead``'s thread (its inputs' shapes are
+        known from the start: the joint state is built with the trainer)."""
+        if self.joint_program is None and ahead.on:
+            self.joint_program = ahead.submit("joint_chunk", self._compile_joint,
+                                              self.joint_args([], side_cost, gammas, sizes))
+
+    def _compile_joint(self, args: tuple):
+        return self.engine.compile("joint_chunk", self.engine.joint_chunk, args, donate=(0,))
+
+    def joint(self, seeds: list[int], side_cost, gammas, sizes, describe):
+        """Joint fine-tuning's chunk for these seeds (the others keep their state)."""
+        a, slots = self.slots.arrays, self.slots
+        args = self.joint_args(seeds, side_cost, gammas, sizes)
+        self.joint_program, compile_s = resolve(self.joint_program, args, self._compile_joint)
         state, stats, metrics, (window, task_window), windows = self.joint_program(*args)
         stats, windows = dist.gather((stats, windows))
         if not all_finite(state.learner.params):

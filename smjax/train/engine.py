@@ -7,7 +7,6 @@ templates, masked per option). Seeds are a leading ``vmap`` axis.
 """
 from __future__ import annotations
 
-import time
 from typing import Any, NamedTuple
 
 import jax
@@ -20,6 +19,7 @@ from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
     EVAL_TEMPERATURES, early_stop_bounds, eval_temperatures, seed_batched_episodes)
 from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
+from smjax.train.ahead import CompileAhead, resolve, signature
 from smjax.train.config import TrainConfig
 from smjax.train.learner import check_joint_learner, frozen_mode
 from smjax.train.program_cache import compile_program
@@ -261,28 +261,25 @@ class Engine:
         return new, stats, metrics, new_windows, running
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
-    @staticmethod
-    def _signature(args: tuple, num_envs: int) -> tuple:
-        """What a compiled episodes program fixes: shapes, dtypes and how the arrays are
-        laid out over devices (a call with another layout gets its own compile, not an
-        error)."""
-        return (num_envs,) + tuple((x.shape, x.dtype, getattr(x, "sharding", None))
-                                   for x in jax.tree.leaves(args))
-
     def _run_episodes(self, args: tuple, num_envs: int) -> tuple[dict, float]:
-        """Call the (once compiled, per ``num_envs``) episodes program; returns its result
-        and the seconds this call spent compiling it (0 when already compiled).
+        """Call the (once compiled, per ``num_envs`` and argument layout) episodes program;
+        its result and the seconds this call spent compiling it or waiting for it."""
+        key = (num_envs, signature(args))
+        program, compile_s = resolve(self._compiled_episodes.get(key), args,
+                                     lambda xs: self._compile_episodes(xs, num_envs))
+        self._compiled_episodes[key] = program
+        return program(*args), compile_s
 
-        (Compiled when first needed, not in a thread beside the training chunk's compile:
-        XLA:CPU's compile already keeps the cores busy, so two at once only contend.)"""
-        sig = self._signature(args, num_envs)
-        compile_s = 0.0
-        if sig not in self._compiled_episodes:
-            t0 = time.perf_counter()
-            self._compiled_episodes[sig] = self.compile(f"episodes-{num_envs}", self.episodes,
-                                                        args, static=(num_envs,))
-            compile_s = time.perf_counter() - t0
-        return self._compiled_episodes[sig](*args), compile_s
+    def episodes_ahead(self, args: tuple, num_envs: int, ahead: CompileAhead) -> None:
+        """Compile the episodes program for these arguments (``gate_args`` or
+        ``evaluate_args``) on ``ahead``'s thread, unless it is compiled or under way."""
+        key = (num_envs, signature(args))
+        if key not in self._compiled_episodes and ahead.on:
+            self._compiled_episodes[key] = ahead.submit(
+                f"episodes-{num_envs}", lambda xs: self._compile_episodes(xs, num_envs), args)
+
+    def _compile_episodes(self, args: tuple, num_envs: int):
+        return self.compile(f"episodes-{num_envs}", self.episodes, args, static=(num_envs,))
 
     def _seed_temperatures(self, policy: str, num_seeds: int) -> jax.Array:
         """float32 [S, O]: each option's temperature under ``policy``, for every seed (a
@@ -290,9 +287,13 @@ class Engine:
         t = eval_temperatures(policy, self.h.num_options, self.cfg.option_temperature)
         return jnp.broadcast_to(t, (num_seeds,) + t.shape)
 
-    def evaluate(self, keys, bank, learned, learner_state=None, place=_same, *,
-                 policy: str | None = None, due: list[bool] | None = None,
-                 threshold: float | None = None) -> tuple[dict, float]:
+    def evaluate(self, *args, **kwargs) -> tuple[dict, float]:
+        """``evaluate_args``' episodes: their result and the seconds spent compiling."""
+        return self._run_episodes(self.evaluate_args(*args, **kwargs), self.cfg.evaluation.eval_envs)
+
+    def evaluate_args(self, keys, bank, learned, learner_state=None, place=_same, *,
+                      policy: str | None = None, due: list[bool] | None = None,
+                      threshold: float | None = None) -> tuple:
         """The trained hierarchy alone (root on the stack, no teleports, nobody learning),
         ``eval_envs`` episodes per seed. ``policy``: how frozen policies pick ("greedy",
         "sample"; None: the run's frozen policy). ``due``: the seeds to evaluate (others
@@ -313,13 +314,16 @@ class Engine:
         # the program (shared with the gate) takes learner params; with none, option 0's
         # bank entry has their shapes (the bank is built from the learners' params)
         params = self._bank_entry0(bank) if learner_state is None else learner_state.params
-        args = (keys, params, bank, learned, learner, start, teleport, temperatures, max_ticks,
+        return (keys, params, bank, learned, learner, start, teleport, temperatures, max_ticks,
                 skip, decide)
-        return self._run_episodes(args, self.cfg.evaluation.eval_envs)
 
-    def gate(self, keys, state: SeedState, bank, learned, learners: list[int],
-             starts: list[int], due: list[bool], thresholds: list[float],
-             place=_same) -> tuple[dict, float]:
+    def gate(self, *args, **kwargs) -> tuple[dict, float]:
+        """``gate_args``' episodes: their result and the seconds spent compiling."""
+        return self._run_episodes(self.gate_args(*args, **kwargs), self.cfg.evaluation.gate_envs)
+
+    def gate_args(self, keys, state: SeedState, bank, learned, learners: list[int],
+                  starts: list[int], due: list[bool], thresholds: list[float],
+                  place=_same) -> tuple:
         """Each seed's learner as it will be frozen, called where the levels above call it
         (``keys``: per seed, varied between attempts by the caller; a seed not ``due`` is
         skipped); a seed's episodes stop once passing its threshold or not is certain."""
@@ -331,6 +335,5 @@ class Engine:
                           self._seed_temperatures(self.frozen_policy, len(learners))))
         teleport, max_ticks = place((jnp.asarray(True), jnp.asarray(self.cfg.evaluation.gate_max_ticks)))
         learner, start, skip, decide, temperatures = per_seed
-        args = (keys, state.learner.params, bank, learned, learner, start, teleport, temperatures,
+        return (keys, state.learner.params, bank, learned, learner, start, teleport, temperatures,
                 max_ticks, skip, decide)
-        return self._run_episodes(args, self.cfg.evaluation.gate_envs)

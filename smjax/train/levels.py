@@ -127,14 +127,9 @@ class LevelStage:
                if st.chunks >= st.level[s].gate_next or self.budget_spent(st, s)]
         if not due:
             return [], []
-        a, S = self.slots.arrays, len(self.slots)
-        # the attempt number varies the gate's episodes between attempts, deterministically
-        keys = fold_in(a.keys, jnp.asarray(st.chunks, jnp.uint32))
         # one vmapped call for all seeds; those not due are skipped (their results unused)
-        result, compile_s = self.engine.gate(
-            keys, a.state, a.bank, a.learned, [c.option for c in controls],
-            [c.start for c in controls], [s in due for s in range(S)],
-            [c.threshold for c in controls], place=self.slots.small)
+        result, compile_s = self.engine.gate(*self.gate_args(st, controls, due),
+                                             place=self.slots.small)
         st.compile_seconds += compile_s
         result = dist.gather(result)
         passed, scalars = [], []
@@ -147,6 +142,21 @@ class LevelStage:
             if success >= level.threshold:
                 passed.append(s)
         return passed, scalars
+
+    def gate_args(self, st: TrainerState, controls: list[SeedControls], due: list[int]):
+        """``Engine.gate``'s arguments for a gate attempt of the ``due`` seeds."""
+        a = self.slots.arrays
+        # the attempt number varies the gate's episodes between attempts, deterministically
+        keys = fold_in(a.keys, jnp.asarray(st.chunks, jnp.uint32))
+        return (keys, a.state, a.bank, a.learned, [c.option for c in controls],
+                [c.start for c in controls], [s in due for s in range(len(self.slots))],
+                [c.threshold for c in controls])
+
+    def gate_ahead(self, st: TrainerState, controls: list[SeedControls], ahead) -> None:
+        """Compile the gate's program on ``ahead``'s thread (with the gate on)."""
+        if self.cfg.evaluation.gate:
+            args = self.engine.gate_args(*self.gate_args(st, controls, []), place=self.slots.small)
+            self.engine.episodes_ahead(args, self.cfg.evaluation.gate_envs, ahead)
 
     def finish(self, st: TrainerState, ends: Ends, options: list[int]) -> None:
         """Freeze the learners of the seeds whose level ended into their banks and record

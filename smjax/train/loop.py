@@ -27,6 +27,7 @@ import jax.numpy as jnp
 
 from smjax.core.timeline import TIMELINE
 from smjax.train import distributed as dist
+from smjax.train.ahead import CompileAhead
 from smjax.train.chunks import ChunkRunner
 from smjax.options.episodes import EVAL_TEMPERATURES
 from smjax.train.engine import Engine, SeedState
@@ -97,6 +98,7 @@ class HierarchyTrainer:
         self.num_stages = len(plans) + (self.finetune is not None)
         self.state = TrainerState.new(plans, S)
         self.runner = ChunkRunner(engine, self.slots, metrics=cfg.tensorboard)
+        self.ahead: CompileAhead | None = None  # made by the first chunk
         self.hooks = (default_hooks(cfg, out_dir, progress, run_meta) if hooks is None
                       else list(hooks))
 
@@ -125,6 +127,16 @@ class HierarchyTrainer:
                    [s for s in self.training() if not st.started[s]])
         for hook in self.hooks:
             hook.start(self)
+        try:
+            return self.train_and_evaluate(t_start)
+        finally:
+            if self.ahead is not None:
+                self.ahead.close()
+
+    def train_and_evaluate(self, t_start: float) -> dict:
+        """The driver loop: chunks, the stages' accounts and decisions, hooks; then the
+        evaluation."""
+        st = self.state
         while self.training():
             t0 = time.perf_counter()
             training, controls = self.training(), self.controls()
@@ -180,10 +192,28 @@ class HierarchyTrainer:
         where = lambda: ", ".join(  # noqa: E731
             f"seed {self.seeds[s]} level {c.level} ({c.name})"
             for s, c in ((s, self.stage_of(s).plan(st, s)) for s in training))
+        on_cpu = jax.default_backend() == "cpu"
+        if self.ahead is None and not on_cpu:  # beside the level chunk's compile
+            self.compile_ahead(controls, threads=2)
         out, compile_s = self.runner.run(
             controls, [s in training for s in range(len(self.seeds))], joint, st.chunks, where)
         st.compile_seconds += compile_s
+        if self.ahead is None:  # a CPU: after it
+            self.compile_ahead(controls, threads=1)
         return out
+
+    def compile_ahead(self, controls: list[SeedControls], threads: int) -> None:
+        """The gate's, joint fine-tuning's and the evaluation's programs, compiled on
+        ``threads`` threads while the chunks run (``smjax.train.ahead`` says when)."""
+        st, ahead, a = self.state, CompileAhead(threads), self.arrays
+        self.ahead = ahead
+        if any(self.levels.holds(st, s) for s in self.training()):
+            self.levels.gate_ahead(st, controls, ahead)
+        if self.finetune is not None and self.finetune.joint:
+            self.runner.joint_ahead(ahead, *self.finetune.joint_controls())
+        self.engine.episodes_ahead(self.engine.evaluate_args(
+            a.keys, a.bank, a.learned, place=self.slots.small), self.cfg.evaluation.eval_envs,
+            ahead)
 
     def decide(self, training: list[int], controls: list[SeedControls], ends: Ends) -> list:
         """Every stage's decisions on the chunk, into ``ends``; the gates' scalars."""

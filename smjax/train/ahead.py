@@ -1,0 +1,127 @@
+"""Programs a run needs later, compiled on a thread while its first programs train.
+
+A run compiles its level chunk first and runs it at once; the gate's episodes program,
+joint fine-tuning's chunk and the final evaluation's program are needed seconds or
+minutes later, and compiling each where it is first needed stops training for as long.
+``CompileAhead`` compiles them on background threads instead. With a GPU (or another
+accelerator) they start with the level chunk's compile, two at a time: the host's cores
+are otherwise idle while the device trains. On a CPU they start after the first level
+chunk, one at a time: XLA's compile already keeps a CPU's cores busy, so they only gain
+what the training chunks leave idle. They are the very
+programs the run would compile when first needed (same function, shapes, dtypes and
+layout), so results do not change; where one is needed before its compile has finished,
+the run waits for it, and that wait is its compile time.
+
+On by default with one process (several processes keep compiling where needed, in the
+same order on each); ``SMJAX_COMPILE_AHEAD=0`` turns it off.
+"""
+from __future__ import annotations
+
+import os
+import queue
+import threading
+from concurrent.futures import Future
+from typing import Any, Callable, NamedTuple
+
+import jax
+
+from smjax.core.timeline import TIMELINE
+
+
+def signature(args) -> tuple:
+    """What a compiled program fixes of its arguments: their structure and each array's
+    shape, dtype, layout and weak type, or a Python value's type (a call that differs
+    needs its own compile)."""
+    leaves, tree = jax.tree.flatten(args)
+    return (tree,) + tuple((getattr(x, "shape", None), getattr(x, "dtype", type(x)),
+                            getattr(x, "sharding", None), getattr(x, "weak_type", None))
+                           for x in leaves)
+
+
+def abstract(tree):
+    """``tree`` with every array replaced by its shape, dtype, layout and weak type: what a
+    compile needs, without holding buffers a later call may donate."""
+    def one(x):
+        if isinstance(x, jax.Array):
+            return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding,
+                                        weak_type=x.weak_type)
+        return x
+    return jax.tree.map(one, tree)
+
+
+class Pending(NamedTuple):
+    """A program being compiled ahead for arguments of this ``signature``."""
+    future: Future
+    signature: tuple
+
+
+class CompileAhead:
+    """Background threads that compile programs, in the order submitted.
+
+    Daemon threads: a run that stops early (an error, Ctrl-C) exits without waiting for a
+    compile it no longer needs. ``threads``: how many programs compile at once."""
+
+    def __init__(self, threads: int = 1, enabled: bool | None = None):
+        if enabled is None:
+            enabled = (os.environ.get("SMJAX_COMPILE_AHEAD", "1").strip().lower()
+                       not in ("0", "false", "off", "no") and jax.process_count() == 1)
+        self.on, self.threads = bool(enabled), threads
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._started = False
+
+    def submit(self, label: str, compile_fn: Callable[[Any], Any], args) -> Pending | None:
+        """``compile_fn(abstract(args))`` on a thread (None where compiling ahead is off);
+        its seconds go on the timeline as ``compile ahead (a thread): label``."""
+        if not self.on:
+            return None
+        future: Future = Future()
+        self._queue.put((future, label, compile_fn, abstract(args)))
+        if not self._started:
+            self._started = True
+            for _ in range(self.threads):
+                threading.Thread(target=self._work, name="smjax-compile-ahead",
+                                 daemon=True).start()
+        return Pending(future, signature(args))
+
+    def _work(self) -> None:
+        while (item := self._queue.get()) is not None:
+            future, label, compile_fn, shapes = item
+            if not future.set_running_or_notify_cancel():
+                continue
+            began = TIMELINE.now()
+            try:
+                future.set_result(compile_fn(shapes))
+            except BaseException as error:  # noqa: BLE001 - raised again where it is used
+                future.set_exception(error)
+            TIMELINE.add(f"compile ahead (a thread): {label}", began, TIMELINE.now() - began)
+
+    def close(self) -> None:
+        """Cancel what has not started; the threads end after the compiles under way."""
+        self.on = False
+        while True:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                break
+            if item is not None:
+                item[0].cancel()
+        for _ in range(self.threads):
+            self._queue.put(None)
+
+
+def resolve(entry, args, compile_fn: Callable[[Any], Any]) -> tuple[Any, float]:
+    """The program to call on ``args``, from ``entry`` (a compiled program, a ``Pending``
+    one, or None), and the seconds this call spent compiling it or waiting for it. A
+    compile ahead for other arguments, or one that failed or was cancelled, is done again
+    here (``compile_fn(args)``), so an error is raised where the program is used."""
+    if entry is not None and not isinstance(entry, Pending):
+        return entry, 0.0
+    began, program = TIMELINE.now(), None
+    if entry is not None and entry.signature == signature(args):
+        try:
+            program = entry.future.result()
+        except BaseException:  # noqa: BLE001 - compiled again below, raising where used
+            program = None
+    if program is None:
+        program = compile_fn(args)
+    return program, TIMELINE.now() - began

@@ -1,0 +1,92 @@
+"""Programs compiled ahead on a thread (``smjax.train.ahead``): the same programs, so the same
+numbers; a compile for other arguments, or one that failed, is done again where needed."""
+import time
+from concurrent.futures import Future
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hier_env import make_keydoor
+from smjax.core.timeline import TIMELINE
+from smjax.train import TrainConfig
+from smjax.train.ahead import CompileAhead, Pending, abstract, resolve, signature
+from smjax.train.run import run
+from test_finetune import SMALL, _strip_timing
+
+JOINT_SMALL = SMALL | {"finetune_mode": "joint"}
+
+
+def _ahead_labels() -> dict:
+    return {k: v[2] for k, v in TIMELINE.spans.items() if k.startswith("compile ahead")}
+
+
+def test_a_run_compiled_ahead_gives_the_numbers_of_one_compiled_where_needed(monkeypatch):
+    cfg = TrainConfig(**JOINT_SMALL)
+    monkeypatch.setenv("SMJAX_COMPILE_AHEAD", "0")
+    before = _ahead_labels()
+    where_needed = run(make_keydoor(), cfg, [0], progress=False)
+    assert _ahead_labels() == before  # off: nothing compiled on a thread
+    monkeypatch.delenv("SMJAX_COMPILE_AHEAD")
+    ahead = run(make_keydoor(), cfg, [0], progress=False)
+    compiled = _ahead_labels()
+    # the gate's (and evaluation's) episodes program and joint fine-tuning's chunk
+    assert {k: n - before.get(k, 0) for k, n in compiled.items()} == {
+        "compile ahead (a thread): episodes-16": 1, "compile ahead (a thread): joint_chunk": 1}
+    assert _strip_timing(ahead) == _strip_timing(where_needed)
+
+
+def _program(x):
+    return x * 2
+
+
+def test_a_compile_ahead_for_other_arguments_is_not_used():
+    jitted = jax.jit(_program)
+    ahead = CompileAhead(threads=1, enabled=True)
+    pending = ahead.submit("x", lambda xs: jitted.lower(*xs).compile(),
+                           (jnp.zeros((3,), jnp.float32),))
+    args = (jnp.ones((4,), jnp.float32),)  # another shape: compiled here
+    program, seconds = resolve(pending, args, lambda xs: jitted.lower(*xs).compile())
+    np.testing.assert_array_equal(program(*args), np.full((4,), 2.0))
+    assert seconds > 0
+    # a compiled program is returned as it is, at no cost
+    assert resolve(program, args, None) == (program, 0.0)
+    ahead.close()
+
+
+def test_a_failed_compile_ahead_is_compiled_again_and_raises_where_used():
+    failed: Future = Future()
+    failed.set_exception(RuntimeError("lost"))
+    args = (jnp.zeros((2,)),)
+    entry = Pending(failed, signature(args))
+    program, _ = resolve(entry, args, lambda xs: jax.jit(_program).lower(*xs).compile())
+    np.testing.assert_array_equal(program(*args), np.zeros(2))
+
+    def broken(xs):
+        raise ValueError("the real error")
+    with pytest.raises(ValueError, match="the real error"):
+        resolve(entry, args, broken)
+
+
+def test_closing_cancels_what_has_not_started_and_off_submits_nothing(monkeypatch):
+    ahead = CompileAhead(threads=1, enabled=True)
+    gate: Future = Future()
+    first = ahead.submit("slow", lambda xs: gate.result(), (jnp.zeros(()),))
+    while not first.future.running():
+        time.sleep(0.01)
+    second = ahead.submit("queued", lambda xs: 1, (jnp.zeros(()),))
+    ahead.close()
+    gate.set_result("done")
+    assert first.future.result(timeout=10) == "done"
+    assert second.future.cancelled()
+    assert ahead.submit("after", lambda xs: 1, ()) is None
+    monkeypatch.setenv("SMJAX_COMPILE_AHEAD", "0")
+    assert not CompileAhead().on
+
+
+def test_abstract_arguments_keep_shape_dtype_layout_and_weak_type():
+    args = ({"a": jnp.ones((2, 3), jnp.int32)}, jnp.asarray(1.0), 7)
+    shapes = abstract(args)
+    assert signature(shapes) == signature(args)
+    assert shapes[1].weak_type and shapes[2] == 7
