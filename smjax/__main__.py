@@ -1,6 +1,6 @@
 """``python -m smjax ...`` is the ``smjax`` command."""
 import sys
 
-from smjax.cli import main
+from smjax.cli import entry
 
-sys.exit(main())
+sys.exit(entry())

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import shlex
 import signal
 import sys
@@ -270,9 +271,21 @@ def main(argv=None) -> int:
         signal.signal(signal.SIGTERM, previous)
 
 
+def entry(argv=None) -> int:
+    """The ``smjax`` command: ``main``, and an exit that does not wait for a compile ahead
+    of an interrupted or failed run (``smjax.train.ahead``) to finish."""
+    code = main(argv)
+    ahead = sys.modules.get("smjax.train.ahead")  # not imported: nothing compiled ahead
+    if ahead is not None and ahead.compiling():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
 def _terminate(signum, frame):
     raise KeyboardInterrupt
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())

@@ -90,3 +90,11 @@ def test_abstract_arguments_keep_shape_dtype_layout_and_weak_type():
     shapes = abstract(args)
     assert signature(shapes) == signature(args)
     assert shapes[1].weak_type and shapes[2] == 7
+
+
+def test_ctrl_c_while_waiting_for_a_compile_ahead_ends_the_run():
+    interrupted: Future = Future()
+    interrupted.set_exception(KeyboardInterrupt())
+    args = (jnp.zeros((2,)),)
+    with pytest.raises(KeyboardInterrupt):
+        resolve(Pending(interrupted, signature(args)), args, lambda xs: pytest.fail("compiled"))

@@ -18,9 +18,9 @@ import sys
 sys.path.insert(0, {tests!r})
 from hier_env import make_keydoor
 from smjax.core.registry import register
-from smjax.cli import main
+from smjax.cli import entry
 register("test/keydoor", lambda: make_keydoor())
-sys.exit(main(["train", "test/keydoor", "--out", {out!r}, "--quiet", "--set", "num_envs=8",
+sys.exit(entry(["train", "test/keydoor", "--out", {out!r}, "--quiet", "--set", "num_envs=8",
                "--set", "rollout_ticks=8", "--set", "checkpoint_every=0",
                "--set", "max_episodes_per_level=10000000", "--set", "threshold=1.0",
                "--set", "success_window=10000"]))

@@ -20,7 +20,8 @@ from __future__ import annotations
 import os
 import queue
 import threading
-from concurrent.futures import Future
+import weakref
+from concurrent.futures import CancelledError, Future
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -58,8 +59,11 @@ class Pending(NamedTuple):
 class CompileAhead:
     """Background threads that compile programs, in the order submitted.
 
-    Daemon threads: a run that stops early (an error, Ctrl-C) exits without waiting for a
-    compile it no longer needs. ``threads``: how many programs compile at once."""
+    ``threads``: how many programs compile at once. A run that stops early (an error,
+    Ctrl-C) cancels the compiles not yet started; a thread cannot be stopped inside XLA's
+    compile, so the interpreter waits for those under way before it exits (a daemon
+    thread left running while it shuts down aborts the process). The ``smjax`` command
+    does not wait: it exits at once (``compiling``)."""
 
     def __init__(self, threads: int = 1, enabled: bool | None = None):
         if enabled is None:
@@ -68,6 +72,8 @@ class CompileAhead:
         self.on, self.threads = bool(enabled), threads
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._started = False
+        self._busy, self._lock = 0, threading.Lock()  # compiles under way
+        _LIVE.add(self)
 
     def submit(self, label: str, compile_fn: Callable[[Any], Any], args) -> Pending | None:
         """``compile_fn(abstract(args))`` on a thread (None where compiling ahead is off);
@@ -79,8 +85,7 @@ class CompileAhead:
         if not self._started:
             self._started = True
             for _ in range(self.threads):
-                threading.Thread(target=self._work, name="smjax-compile-ahead",
-                                 daemon=True).start()
+                threading.Thread(target=self._work, name="smjax-compile-ahead").start()
         return Pending(future, signature(args))
 
     def _work(self) -> None:
@@ -89,10 +94,15 @@ class CompileAhead:
             if not future.set_running_or_notify_cancel():
                 continue
             began = TIMELINE.now()
+            with self._lock:
+                self._busy += 1
             try:
                 future.set_result(compile_fn(shapes))
             except BaseException as error:  # noqa: BLE001 - raised again where it is used
                 future.set_exception(error)
+            finally:
+                with self._lock:
+                    self._busy -= 1
             TIMELINE.add(f"compile ahead (a thread): {label}", began, TIMELINE.now() - began)
 
     def close(self) -> None:
@@ -109,6 +119,14 @@ class CompileAhead:
             self._queue.put(None)
 
 
+_LIVE: "weakref.WeakSet[CompileAhead]" = weakref.WeakSet()
+
+
+def compiling() -> bool:
+    """Whether a compile ahead is under way (for a command that is about to exit)."""
+    return any(ahead._busy for ahead in list(_LIVE))
+
+
 def resolve(entry, args, compile_fn: Callable[[Any], Any]) -> tuple[Any, float]:
     """The program to call on ``args``, from ``entry`` (a compiled program, a ``Pending``
     one, or None), and the seconds this call spent compiling it or waiting for it. A
@@ -120,7 +138,7 @@ def resolve(entry, args, compile_fn: Callable[[Any], Any]) -> tuple[Any, float]:
     if entry is not None and entry.signature == signature(args):
         try:
             program = entry.future.result()
-        except BaseException:  # noqa: BLE001 - compiled again below, raising where used
+        except (Exception, CancelledError):  # compiled again below, raising where used
             program = None
     if program is None:
         program = compile_fn(args)
