@@ -19,7 +19,7 @@ JOINT_SMALL = SMALL | {"finetune_mode": "joint"}
 
 
 def _ahead_labels() -> dict:
-    return {k: v[2] for k, v in TIMELINE.spans.items() if k.startswith("compile ahead")}
+    return {k: v[1] for k, v in TIMELINE.jax.items() if k.startswith("compile ahead")}
 
 
 def test_a_run_compiled_ahead_gives_the_numbers_of_one_compiled_where_needed(monkeypatch):

@@ -63,6 +63,13 @@ class Timeline:
         entry[1] += seconds
         entry[2] += 1
 
+    def inside(self, label: str, seconds: float) -> None:
+        """``seconds`` of work that ran beside the phases (a background thread's), listed
+        with JAX's totals so that the phases still add up to the whole command."""
+        entry = self.jax.setdefault(label, [0.0, 0])
+        entry[0] += seconds
+        entry[1] += 1
+
     def count(self, label: str) -> None:
         """One more of ``label`` (an event without a duration), listed with JAX's totals."""
         self.jax.setdefault(label, [0.0, 0])[1] += 1

@@ -77,7 +77,8 @@ class CompileAhead:
 
     def submit(self, label: str, compile_fn: Callable[[Any], Any], args) -> Pending | None:
         """``compile_fn(abstract(args))`` on a thread (None where compiling ahead is off);
-        its seconds go on the timeline as ``compile ahead (a thread): label``."""
+        its seconds go on the timeline, beside the phases, as ``compile ahead (a thread):
+        label``."""
         if not self.on:
             return None
         future: Future = Future()
@@ -103,7 +104,7 @@ class CompileAhead:
             finally:
                 with self._lock:
                     self._busy -= 1
-            TIMELINE.add(f"compile ahead (a thread): {label}", began, TIMELINE.now() - began)
+            TIMELINE.inside(f"compile ahead (a thread): {label}", TIMELINE.now() - began)
 
     def close(self) -> None:
         """Cancel what has not started; the threads end after the compiles under way."""
