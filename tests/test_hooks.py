@@ -1,8 +1,5 @@
 """The driver loop's side jobs are hooks: a run with its own hooks gets every chunk's report
 and its results (a sweep: each point's), and a run without hooks writes and prints nothing."""
-import numpy as np
-import pytest
-
 from hier_env import make_keydoor
 from smjax.agents import make_agent
 from smjax.train import TrainConfig
@@ -96,7 +93,6 @@ def test_stage_end_checkpoints_are_coalesced_but_the_first_and_last_are_written(
 class _FakeWandbRun:
     def __init__(self, **kwargs):
         self.kwargs, self.rows, self.axes, self.finished = kwargs, [], {}, False
-        self.summary = {}
 
     def define_metric(self, name, step_metric):
         self.axes[name] = step_metric
@@ -144,11 +140,6 @@ def test_a_callers_hooks_run_beside_the_built_in_ones_and_wandb_gets_every_scala
     assert [{k: v for k, v in row.items() if k != "env_steps_per_second"}
             for row in wb.rows] == expected
     assert all(wb.axes[name] == f"{name}/env_step" for name in wb.axes) and wb.axes
-    # the results in the run's summary
-    assert wb.summary["final_success"] == raw["final_success"]
-    assert wb.summary["final_success_mean"] == pytest.approx(np.mean(raw["final_success"]))
-    assert wb.summary["wall_seconds"] == raw["wall_seconds"]
-    assert "config" not in wb.summary and "levels" not in wb.summary  # numbers only
 
 
 def test_wandb_hook_writes_an_offline_run(tmp_path, monkeypatch):
@@ -157,27 +148,11 @@ def test_wandb_hook_writes_an_offline_run(tmp_path, monkeypatch):
     pytest.importorskip("wandb")
     from smjax.train.wandb_hook import WandbHook
 
-    from smjax.train.run import run
-
     monkeypatch.setenv("WANDB_MODE", "offline")
     monkeypatch.setenv("WANDB_SILENT", "true")
-    summaries = []
-
-    class Kept(WandbHook):  # the summary as the run ends (offline, it lives in a binary log)
-        def results(self, trainer, report):
-            run_, finish = self.run, self.run.finish
-
-            def finish_after_reading_the_summary(*args, **kwargs):
-                summaries.append({k: run_.summary[k] for k in run_.summary.keys()})
-                return finish(*args, **kwargs)
-            run_.finish = finish_after_reading_the_summary
-            super().results(trainer, report)
-
-    hook = Kept(project="smjax-test", dir=str(tmp_path))
-    raw = run(make_keydoor(), SMALL.replace(checkpoint_every=1e9), [0], tmp_path / "out",
-              progress=False, hooks=[hook])
-    assert list(tmp_path.rglob("*.wandb")) and hook.run is None  # written, and ended
-    assert summaries[0]["final_success"] == raw["final_success"]
+    trainer = _trainer([WandbHook(project="smjax-test", dir=str(tmp_path))], seeds=(0,))
+    trainer.run()
+    assert list(tmp_path.rglob("*.wandb"))
 
 
 def test_wandb_hook_without_wandb_says_how_to_install_it(monkeypatch):

@@ -7,10 +7,7 @@
 Each chunk logs the stages' scalars (the names TensorBoard gets, e.g.
 ``seed_0/level_1_get_wood/running_success``), each charted against its own env step
 (``NAME/env_step``: seeds and levels count env steps apart), then the chunk's number and
-the run's env steps per second. The results (results.json's numbers: ``final_success``
-per seed and its mean, ``episodes_to_threshold``, ``wall_seconds``, ...) go into the W&B
-run's summary, a sweep point's under ``point-K/``; a run ends with its results (a sweep's
-W&B run when the process exits). With several processes only process 0 logs.
+the run's env steps per second. With several processes only process 0 logs.
 ``WANDB_MODE=offline`` keeps everything on disk.
 """
 from __future__ import annotations
@@ -18,7 +15,7 @@ from __future__ import annotations
 from typing import Any
 
 from smjax.train import distributed as dist
-from smjax.train.hooks import ChunkReport, Hook, ResultsReport
+from smjax.train.hooks import ChunkReport, Hook
 
 
 class WandbHook(Hook):
@@ -55,25 +52,7 @@ class WandbHook(Hook):
         self.run.log({"chunk": report.chunk,
                       "env_steps_per_second": report.steps / max(report.seconds, 1e-9)})
 
-    def results(self, trainer, report: ResultsReport) -> None:
-        if self.run is None:
-            return
-        prefix = "" if report.overrides is None else f"{report.out_dir.name}/"
-        for name, value in summary_numbers(report.results).items():
-            self.run.summary[prefix + name] = value
-        if report.overrides is None:  # a sweep's points keep coming: its run ends at exit
+    def end(self, trainer) -> None:
+        if self.run is not None:
             self.run.finish()
             self.run = None
-
-
-def summary_numbers(results: dict) -> dict:
-    """results.json's numbers and lists of numbers (with their mean), for a run's summary."""
-    out = {}
-    for name, value in results.items():
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            out[name] = value
-        elif isinstance(value, list) and value and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-            out[name] = value
-            out[f"{name}_mean"] = sum(value) / len(value)
-    return out
