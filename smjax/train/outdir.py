@@ -23,8 +23,8 @@ import os
 import shutil
 import socket
 import stat
+import sys
 import time
-import warnings
 from pathlib import Path
 
 LOCK_NAME = ".smjax.lock"
@@ -273,9 +273,8 @@ def prepare_out_dir(out: str | Path, *, resume: bool, overwrite: bool) -> DirLoc
     try:
         if lock.stale_owner:
             o = lock.stale_owner
-            # a warning, not a print: the library prints nothing outside the progress hook
-            warnings.warn(f"took over the stale lock of {out} (pid {o.get('pid')} on host "
-                          f"{o.get('host')} is gone)", stacklevel=2)
+            print(f"note: took over the stale lock of {out} (pid {o.get('pid')} on host "
+                  f"{o.get('host')} is gone)", file=sys.stderr)
         check_no_links(out)
         found = existing_run_files(out)
         if found and not resume:
