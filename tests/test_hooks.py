@@ -92,7 +92,8 @@ def test_stage_end_checkpoints_are_coalesced_but_the_first_and_last_are_written(
 
 class _FakeWandbRun:
     def __init__(self, **kwargs):
-        self.kwargs, self.rows, self.axes, self.finished = kwargs, [], {}, False
+        self.kwargs, self.rows, self.axes, self.summary = kwargs, [], {}, {}
+        self.finished, self.exit_code = False, None
 
     def define_metric(self, name, step_metric):
         self.axes[name] = step_metric
@@ -100,23 +101,31 @@ class _FakeWandbRun:
     def log(self, row):
         self.rows.append(dict(row))
 
-    def finish(self):
-        self.finished = True
+    def finish(self, exit_code=None):
+        self.finished, self.exit_code = True, exit_code
 
 
-def test_a_callers_hooks_run_beside_the_built_in_ones_and_wandb_gets_every_scalar(
-        tmp_path, monkeypatch):
-    # W&B's own client is an optional extra: a stand-in module records what the hook
-    # hands it (the real one, offline, in the test below where it is installed)
+def _fake_wandb(monkeypatch) -> list:
+    """A stand-in wandb module (W&B's client is an optional extra); the runs it started."""
     import sys
     import types
-
-    from smjax.train.run import run
-    from smjax.train.wandb_hook import WandbHook
 
     runs = []
     fake = types.SimpleNamespace(init=lambda **kw: runs.append(_FakeWandbRun(**kw)) or runs[-1])
     monkeypatch.setitem(sys.modules, "wandb", fake)
+    return runs
+
+
+def test_a_callers_hooks_run_beside_the_built_in_ones_and_wandb_gets_every_scalar(
+        tmp_path, monkeypatch):
+    # a stand-in wandb module records what the hook hands it (the real one, offline, in
+    # the test below where it is installed)
+    import numpy as np
+
+    from smjax.train.run import run
+    from smjax.train.wandb_hook import WandbHook
+
+    runs = _fake_wandb(monkeypatch)
     recorder = Recorder()
     cfg = SMALL.replace(checkpoint_every=1e9)
     raw = run(make_keydoor(), cfg, [0], tmp_path / "out", progress=False,
@@ -140,19 +149,63 @@ def test_a_callers_hooks_run_beside_the_built_in_ones_and_wandb_gets_every_scala
     assert [{k: v for k, v in row.items() if k != "env_steps_per_second"}
             for row in wb.rows] == expected
     assert all(wb.axes[name] == f"{name}/env_step" for name in wb.axes) and wb.axes
+    # the results, evaluated after training ended, are the run's summary before it finishes
+    assert wb.exit_code is None
+    for key in ("final_success", "episodes_to_threshold", "total_episodes", "wall_seconds",
+                "compile_seconds", "seeds", "device"):
+        assert wb.summary[key] == raw[key]
+    assert wb.summary["final_success_mean"] == np.mean(raw["final_success"])
+    assert wb.summary["finetune/episodes"] == raw["finetune"]["episodes"]
+    assert "config" not in wb.summary and "levels" not in wb.summary
 
 
-def test_wandb_hook_writes_an_offline_run(tmp_path, monkeypatch):
+def test_wandb_hook_finishes_a_trainer_run_on_its_own_and_a_failed_run_as_failed(monkeypatch):
+    import types
+
+    from smjax.train.wandb_hook import WandbHook
+
+    runs = _fake_wandb(monkeypatch)
+    # outside run() no results follow training: the W&B run finishes with it
+    _trainer([WandbHook()], seeds=(0,)).run()
+    assert runs[0].finished and runs[0].summary == {}
+    # a run that failed before its results is finished, failed, when the hook starts again
+    hook, trainer = WandbHook(), types.SimpleNamespace(cfg=SMALL)
+    hook.start(trainer)
+    hook.start(trainer)
+    assert runs[1].finished and runs[1].exit_code == 1 and not runs[2].finished
+
+
+def test_wandb_hook_writes_an_offline_run_whose_summary_holds_the_results(tmp_path,
+                                                                          monkeypatch):
+    import json
+
     import pytest
 
-    pytest.importorskip("wandb")
+    wandb = pytest.importorskip("wandb")
+    from smjax.train.run import run
     from smjax.train.wandb_hook import WandbHook
 
     monkeypatch.setenv("WANDB_MODE", "offline")
     monkeypatch.setenv("WANDB_SILENT", "true")
-    trainer = _trainer([WandbHook(project="smjax-test", dir=str(tmp_path))], seeds=(0,))
-    trainer.run()
+    summaries = []  # each run's summary as it finishes (an offline run's is read back empty)
+
+    def init(**kwargs):
+        started = wandb_init(**kwargs)
+        finish = started.finish
+        started.finish = lambda **kw: (summaries.append(dict(started.summary)), finish(**kw))
+        return started
+
+    wandb_init = wandb.init
+    monkeypatch.setattr(wandb, "init", init)
+    cfg = SMALL.replace(checkpoint_every=1e9)
+    run(make_keydoor(), cfg, [0, 1], tmp_path / "out", progress=False,
+        hooks=[WandbHook(project="smjax-test", dir=str(tmp_path))])
     assert list(tmp_path.rglob("*.wandb"))
+    results = json.loads((tmp_path / "out" / "results.json").read_text())
+    (summary,) = summaries
+    assert summary["final_success"] == results["final_success"]
+    assert summary["final_success_mean"] == pytest.approx(sum(results["final_success"]) / 2)
+    assert summary["wall_seconds"] == results["wall_seconds"]
 
 
 def test_wandb_hook_without_wandb_says_how_to_install_it(monkeypatch):
@@ -167,16 +220,26 @@ def test_wandb_hook_without_wandb_says_how_to_install_it(monkeypatch):
         WandbHook()
 
 
-def test_a_callers_hook_gets_each_sweep_points_results_with_its_directory(tmp_path):
+def test_a_callers_hook_gets_each_sweep_points_results_with_its_directory(tmp_path,
+                                                                          monkeypatch):
     from smjax.train.run import run
+    from smjax.train.wandb_hook import WandbHook
 
+    runs = _fake_wandb(monkeypatch)
     recorder = Recorder()
     cfg = SMALL.replace(finetune="off", max_episodes_per_level=60, checkpoint_every=1e9)
     lrs = [1e-4, 1e-3]
     out = tmp_path / "sweep"
     swept = run(make_keydoor(), cfg, [0], out, progress=False,
-                sweep={"agent.learning_rate": lrs}, hooks=[recorder])
+                sweep={"agent.learning_rate": lrs}, hooks=[recorder, WandbHook()])
     assert recorder.calls[-3:] == ["end", "results", "results"]
+    # one W&B run for the sweep, finished after the last point, each point's results in
+    # its summary under the point's overrides
+    (wb,) = runs
+    assert wb.finished
+    for lr, point in zip(lrs, swept["points"]):
+        assert (wb.summary[f"agent.learning_rate={lr}/final_success"]
+                == point["results"]["final_success"])
     assert [r.out_dir for r, _ in recorder.outcomes] == [out / "point-0", out / "point-1"]
     assert [r.overrides for r, _ in recorder.outcomes] == [{"agent.learning_rate": lr}
                                                           for lr in lrs]

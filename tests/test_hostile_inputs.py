@@ -300,8 +300,10 @@ def test_a_held_lock_refuses_a_second_run_and_names_its_owner(tmp_path):
     finally:
         holder.kill()
         holder.wait()
-    # the holder died without releasing: the kernel freed the flock, the file is stale
-    lock = prepare_out_dir(out, resume=False, overwrite=False)
+    # the holder died without releasing: the kernel freed the flock, the file is stale,
+    # and taking it over is a warning naming the dead owner
+    with pytest.warns(UserWarning, match=f"took over the stale lock .*pid {holder.pid} "):
+        lock = prepare_out_dir(out, resume=False, overwrite=False)
     assert lock.stale_owner["pid"] == holder.pid
     lock.release()
     assert not (out / LOCK_NAME).exists()

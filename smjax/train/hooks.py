@@ -59,7 +59,9 @@ class Hook:
         """A chunk ran and the stages decided on it."""
 
     def end(self, trainer) -> None:
-        """Every seed finished training (evaluation follows)."""
+        """Every seed finished training (evaluation follows, then ``trainer.results_due``
+        calls of ``results``: one for a run, one per sweep point, none where the trainer is
+        run on its own, outside ``smjax.train.run``)."""
 
     def results(self, trainer, report: ResultsReport) -> None:
         """The evaluated results are ready: once per run, once per point of a sweep (in

@@ -101,6 +101,9 @@ class HierarchyTrainer:
         self.ahead: CompileAhead | None = None  # made by the first chunk
         self.hooks = (default_hooks(cfg, out_dir, progress, run_meta) if hooks is None
                       else list(hooks))
+        # the results calls the hooks get after ``end``: ``smjax.train.run`` sets it (one a
+        # run, one a sweep point); none where the trainer is run on its own
+        self.results_due = 0
 
     @property
     def arrays(self) -> TrainArrays:

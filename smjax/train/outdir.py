@@ -4,7 +4,7 @@
 writable) and takes an advisory lock on it (``.smjax.lock`` with the owner's pid, host
 and start time). The lock is an ``flock`` on that file, so the kernel releases it when
 the owner exits in any way (SIGKILL included); a lock file whose lock is free is
-therefore stale, and it is named when a new run takes it over. A directory that already
+therefore stale, and a warning names it when a new run takes it over. A directory that already
 holds a run's files (results, curves, policy, checkpoints) is refused unless the caller resumes
 it or asks to overwrite it, so nothing is replaced without a word; ``--overwrite`` then
 deletes exactly the files the refusal named (inside ``checkpoints``, only smjax's own).
@@ -23,8 +23,8 @@ import os
 import shutil
 import socket
 import stat
-import sys
 import time
+import warnings
 from pathlib import Path
 
 LOCK_NAME = ".smjax.lock"
@@ -273,8 +273,8 @@ def prepare_out_dir(out: str | Path, *, resume: bool, overwrite: bool) -> DirLoc
     try:
         if lock.stale_owner:
             o = lock.stale_owner
-            print(f"note: took over the stale lock of {out} (pid {o.get('pid')} on host "
-                  f"{o.get('host')} is gone)", file=sys.stderr)
+            warnings.warn(f"took over the stale lock of {out} (pid {o.get('pid')} on host "
+                          f"{o.get('host')} is gone)", stacklevel=2)
         check_no_links(out)
         found = existing_run_files(out)
         if found and not resume:

@@ -183,6 +183,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
                 _policy_meta(task, engine, resolved.hierarchy_name, given, env_overrides)))
         trainer = HierarchyTrainer(engine, list(resolved.plans), slot_seeds, hp=hp,
                                    configs=configs, hooks=hooks + list(outputs.hooks))
+        trainer.results_due = len(points) if points is not None else 1
     if not engine.root_has_threshold and dist.is_writer():
         root = resolved.hierarchy.task
         warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(root).threshold), stacklevel=3)
