@@ -43,10 +43,11 @@ from smjax.options.episodes import EVAL_TEMPERATURES, eval_temperatures
 from smjax.policy import load_policy
 
 
-def _frozen_controls(learned, temperature) -> Controls:
-    """The final evaluation's controls: root on the stack, no teleports, nobody learns."""
-    return Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, jnp.asarray(False),
-                    temperature=temperature, acts_frozen=True)
+def _frozen_controls(learned, temperature, gamma: float) -> Controls:
+    """The final evaluation's controls: root on the stack, no teleports, nobody learns,
+    episodes reset where the task ends (``gamma``: the run's discount; nothing reads it)."""
+    return Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), learned, gamma=gamma,
+                    teleport=jnp.asarray(False), temperature=temperature, acts_frozen=True)
 
 
 def _item_name(kinds, k: int) -> str:
@@ -60,7 +61,7 @@ def _inventory(state):
     return None if inv is None else inv.astype(jnp.float32)
 
 
-def episodes_program(runner, num_envs: int, max_ticks: int):
+def episodes_program(runner, gamma: float, num_envs: int, max_ticks: int):
     """jit(vmap over seeds) of: run ``num_envs`` environments until each has finished one
     episode; per environment (return, success, length in ticks, finished), and, where the
     state has an inventory, the units of each item gained per option [O, K] (summed over
@@ -73,7 +74,7 @@ def episodes_program(runner, num_envs: int, max_ticks: int):
     O, A = runner.h.num_options, runner.h.num_actions
 
     def one_seed(key, bank, learned, temperature):
-        controls = _frozen_controls(learned, temperature)
+        controls = _frozen_controls(learned, temperature, gamma)
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
         deciding = runner.deciding(learned, False)  # fixed for the whole run (top_choice)
@@ -130,13 +131,13 @@ def episodes_program(runner, num_envs: int, max_ticks: int):
 TRACE_ENVS = 256  # environments a trace plays (its per-tick record is [ticks, envs, items])
 
 
-def trace_program(runner, num_envs: int, ticks: int):
+def trace_program(runner, gamma: float, num_envs: int, ticks: int):
     """jit of: one seed's ``num_envs`` environments for ``ticks`` ticks from reset, as the
     evaluation plays them (nobody learns); the start states, and per tick [T, B] the option
     on top, the inventory [T, B, K] and position [T, B, 2] (zero-width where the state has
     none), whether an episode ended, and its success."""
     def play(key, bank, learned, temperature):
-        controls = _frozen_controls(learned, temperature)
+        controls = _frozen_controls(learned, temperature, gamma)
         k_reset, key = jax.random.split(key)
         carry = runner.reset(k_reset, controls, num_envs)
 
@@ -271,7 +272,7 @@ def main(argv=None) -> int:
         parser.error("--episodes and --max-ticks must be >= 1, --trace >= 0")
     policy = load_policy(args.run_dir)
     runner, (bank, learned), seeds = policy.runner, policy.params(), policy.seeds
-    program = episodes_program(runner, args.episodes, args.max_ticks)
+    program = episodes_program(runner, policy.gamma, args.episodes, args.max_ticks)
     keys = jax.random.split(jax.random.key(args.seed), len(seeds))
     temperature = eval_temperatures(args.policy, runner.h.num_options,
                                     policy.meta["evaluation"]["option_temperature"])
@@ -302,7 +303,8 @@ def main(argv=None) -> int:
         Path(args.json).write_text(text + "\n")
     if args.trace:  # the first seed's start states again (its reset key), fresh tick keys
         first = jax.tree.map(lambda x: x[0], (bank, learned))
-        program = trace_program(runner, min(args.episodes, TRACE_ENVS), args.max_ticks)
+        program = trace_program(runner, policy.gamma, min(args.episodes, TRACE_ENVS),
+                                args.max_ticks)
         start, per_tick = program(keys[0], *first, temperature)
         print(trace_lost(runner, start, per_tick, args.trace, kinds), file=sys.stderr)
     return 0

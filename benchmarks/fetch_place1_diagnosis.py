@@ -57,7 +57,8 @@ def main() -> None:
     fresh = engine.init_learner(jax.random.split(jax.random.PRNGKey(1), 1))
 
     # A fresh place_1 learner under the frozen root and learned place_0.
-    controls = Controls(jnp.asarray(ids["place_1"]), jnp.asarray(0), learned[0])
+    controls = Controls(jnp.asarray(ids["place_1"]), jnp.asarray(0), learned[0],
+                        gamma=engine.gamma, temperature=engine.temperature)
     learner = jax.tree.map(lambda x: x[0], fresh)
     tick = jax.jit(lambda c, k: engine.runner.tick(c, k, learner, bank, controls))
     carry = engine.runner.reset(jax.random.PRNGKey(2), controls, NUM_ENVS)

@@ -44,9 +44,9 @@ from smjax.options.runner import NO_OPTION, Controls, HierarchyRunner
 def scripted_runner(env, params, levels: int = 2, epsilon: float = 0.0):
     """(runner, controls) that play the scripted hierarchy: no agent, no teleports."""
     h = scripted_hierarchy(env, levels, epsilon)
-    runner = HierarchyRunner(env, params, h, None, gamma=1.0, allow_teleport=False)
+    runner = HierarchyRunner(env, params, h, None)
     controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0),
-                        jnp.zeros((h.num_options,), bool))
+                        jnp.zeros((h.num_options,), bool), gamma=1.0, teleport=False)
     return runner, controls
 
 

@@ -66,9 +66,10 @@ def record_rollout(engine, state, learned):
 
     def one(st, learned_s):
         controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), learned_s,
-                            jnp.asarray(False), jnp.asarray(False), side_cost=jnp.asarray(0.0),
-                            gamma=jnp.full((O,), 0.99, jnp.float32), acts_frozen=True,
-                            joint=True)
+                            gamma=jnp.full((O,), 0.99, jnp.float32),
+                            teleport=jnp.asarray(False), continue_episodes=jnp.asarray(False),
+                            temperature=engine.temperature, side_cost=jnp.asarray(0.0),
+                            acts_frozen=True, joint=True)
 
         def tick(c, k):
             c, tr, _ = engine.runner.tick(c, k, st.learner, None, controls)

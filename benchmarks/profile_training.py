@@ -138,9 +138,12 @@ def profile(args) -> dict:
         switches = tuple(v for k, v in level.items() if k in takes)
         call = lambda st: chunk(st, active, bank, learned, learners, starts, *switches)[1]  # noqa: E731
     record("chunk", call, (state,))
+    # the level's tick settings, as the chunk's (an older tree's runner held the
+    # temperature: None there)
+    settings = dict(gamma=float(cfg.gamma), temperature=getattr(engine, "temperature", None))
 
     def rollout_one(st: SeedState, bank_s, learned_s):
-        controls = Controls(learner_id, start, learned_s)
+        controls = Controls(learner_id, start, learned_s, **settings)
 
         def tick_fn(c, k):
             c, tr, _ = runner.tick(c, k, st.learner, bank_s, controls)
@@ -197,7 +200,7 @@ def profile(args) -> dict:
         def body(c, _):
             if hasattr(runner, "frozen_logits"):  # only the options that can decide
                 lg = runner.frozen_logits(bank_s, obs_s + c * 0,
-                                          Controls(learner_id, start, learned_s))
+                                          Controls(learner_id, start, learned_s, **settings))
             else:
                 lg = jax.vmap(agent.policy_logits, (0, None))(bank_s, obs_s + c * 0)
             return c + lg.sum() * 1e-9, None

@@ -158,8 +158,9 @@ def test_each_option_is_discounted_at_its_own_gamma(keydoor_engine):
     O = engine.h.num_options
     gamma = jnp.linspace(0.99, 0.9, O).astype(jnp.float32)
     controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), jnp.ones((O,), bool),
-                        jnp.asarray(False), jnp.asarray(False), side_cost=jnp.asarray(1.0),
-                        gamma=gamma, acts_frozen=True, joint=True)
+                        gamma=gamma, teleport=jnp.asarray(False),
+                        continue_episodes=jnp.asarray(False), temperature=engine.temperature,
+                        side_cost=jnp.asarray(1.0), acts_frozen=True, joint=True)
     learners = jax.tree.map(lambda x: x[0], state.learner)
     carry = jax.tree.map(lambda x: x[0], state.carry)
     tick = jax.jit(lambda c, k: engine.runner.tick(c, k, learners, None, controls))

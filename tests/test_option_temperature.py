@@ -1,11 +1,13 @@
 """The templates' own sampling temperature (``TrainConfig.option_temperature``): the root
 samples at 1, every template below it at the configured temperature, in training, gates
 and the final "sample" evaluation; every evaluation mode has one temperature per option."""
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from hier_env import KeyDoor, make_keydoor
+from smjax.options.bank import frozen_temperature
 from smjax.options.runner import Controls, HierarchyRunner
 from smjax.train import ConfigError, TrainConfig
 from smjax.train.engine import EVAL_TEMPERATURES, eval_temperatures
@@ -42,19 +44,25 @@ def test_a_run_samples_its_templates_at_the_option_temperature():
     assert by_policy["sample"] == by_policy["options_t0.5"] == res["final_success"]
 
 
-def test_the_runner_samples_the_root_at_its_temperature_and_templates_at_theirs():
+def test_a_run_samples_the_root_at_its_temperature_and_templates_at_theirs():
+    # the tick's temperature (Controls.temperature) of a run's frozen-policy mode
+    np.testing.assert_allclose(frozen_temperature("sample", 0.5, 2), [1.0, 0.5])
+    same = frozen_temperature("sample", 1.0, 2)
+    assert isinstance(same, float) and same == 1.0  # one float: no per-option pick
+    greedy = frozen_temperature("greedy", 0.5, 2)
+    assert isinstance(greedy, float) and greedy == 0.0  # the argmax alone
+    with pytest.raises(ValueError, match="option_temperature"):
+        frozen_temperature("sample", 0.0, 2)
+
+
+def test_the_tick_picks_at_the_runs_temperature():
+    # the root's frozen policy samples at 1 while the template below it picks greedily
     env = KeyDoor()
     h = env.hierarchies()["paper"]
-    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([True, True]))
-    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions),
-                             gamma=0.9, frozen_policy="sample", template_temperature=0.5)
-    np.testing.assert_allclose(runner.frozen_temperature_of(controls), [1.0, 0.5])
-    same = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions),
-                           gamma=0.9, frozen_policy="sample", template_temperature=1.0)
-    assert same.frozen_temperature_of(controls) == 1.0  # one float: no per-option pick
-    greedy = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions),
-                             gamma=0.9, frozen_policy="greedy", template_temperature=0.5)
-    assert greedy.frozen_temperature_of(controls) == 0.0
-    with pytest.raises(ValueError, match="template_temperature"):
-        HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions), gamma=0.9,
-                        template_temperature=0.0)
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions))
+    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([True, True]), gamma=0.9,
+                        temperature=frozen_temperature("sample", 1e-3, h.num_options))
+    flat = jnp.zeros((2, 512, h.num_actions)).at[:, :, 2].set(0.5)  # nearly uniform scores
+    picks = np.asarray(runner._frozen_pick(flat, jax.random.PRNGKey(3), controls))
+    assert len(set(picks[0].tolist())) == h.num_actions  # the root: a sample
+    assert (picks[1] == 2).all()                          # the template: nearly the argmax

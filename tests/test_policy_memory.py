@@ -51,8 +51,8 @@ def test_the_tick_remembers_the_executed_primitive():
     env = KeyDoor()
     h = env.hierarchies()["flat"]
     runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions),
-                             gamma=0.9, policy_memory="last_action")
-    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False]))
+                             policy_memory="last_action")
+    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False]), gamma=0.9)
     carry = runner.reset(jax.random.PRNGKey(0), controls, 6)
     width = carry.obs.shape[1] - 4
     assert not np.asarray(carry.obs[:, width:]).any()

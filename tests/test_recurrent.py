@@ -37,10 +37,10 @@ def _rollouts(learner: int, sharpen: float = 30.0, num_envs=16, ticks=24, rollou
     p["policy_head"]["kernel"] = p["policy_head"]["kernel"] * sharpen
     state = state.replace(params={"params": p})
     bank = jax.tree.map(lambda x: jnp.stack([x] * h.num_options), state.params)
-    runner = HierarchyRunner(env, params, h, agent, gamma=0.9, frozen_policy="sample")
+    runner = HierarchyRunner(env, params, h, agent)
     learned = jnp.asarray([learner != 0, False])
-    controls = Controls(jnp.asarray(learner), jnp.asarray(0), learned,
-                        teleport=jnp.asarray(learner == 0),
+    controls = Controls(jnp.asarray(learner), jnp.asarray(0), learned, gamma=0.9,
+                        temperature=1.0, teleport=jnp.asarray(learner == 0),
                         continue_episodes=jnp.asarray(learner != 0))
     carry = runner.reset(jax.random.PRNGKey(2), controls, num_envs)
 

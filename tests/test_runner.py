@@ -8,6 +8,7 @@ import pytest
 
 from hier_env import KeyDoor
 from smjax.agents.base import ActOutput, Agent
+from smjax.options.bank import frozen_temperature
 from smjax.options.runner import NO_OPTION, Controls, HierarchyRunner
 
 B = 6
@@ -29,8 +30,9 @@ def setup(hname, learner_choice, bank_logits, learned, learner=0, start=0):
     params = env.default_params
     h = env.hierarchies()[hname]
     agent = fixed_agent(learner_choice, h.num_actions)
-    runner = HierarchyRunner(env, params, h, agent, gamma=GAMMA, frozen_policy="greedy")
-    controls = Controls(jnp.asarray(learner), jnp.asarray(start), jnp.asarray(learned))
+    runner = HierarchyRunner(env, params, h, agent)
+    controls = Controls(jnp.asarray(learner), jnp.asarray(start), jnp.asarray(learned),
+                        gamma=GAMMA, temperature=0.0)
     carry = runner.reset(jax.random.PRNGKey(0), controls, B)
     bank = jnp.asarray(bank_logits, jnp.float32)
     tick = jax.jit(lambda c, k: runner.tick(c, k, None, bank, controls))
@@ -100,12 +102,14 @@ def test_template_learner_reward_is_satisfaction_and_its_end_resets():
 def test_learner_masks_respect_children_and_initiation():
     env, h, runner, carry, tick = setup("paper", 3, np.zeros((2, 4)), [False, False], learner=1)
     bank = jnp.zeros((2, 4))
-    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, False]))
+    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, False]), gamma=GAMMA)
     _, tr, _ = runner.tick(carry, jax.random.PRNGKey(0), None, bank, controls)
     # give_key's own children are the primitives only
     np.testing.assert_array_equal(np.asarray(tr.action_mask[0]), [True, True, True, False])
     masks = jax.vmap(lambda s: runner.action_masks(runner._initiation(s),
-                                                   runner.callable_options(controls.learned, controls.learner)))(
+                                                   runner.callable_options(
+                                                       controls.learned, controls.learner,
+                                                       runner.teleports_on(controls))))(
         carry.env_state.replace(has_key=jnp.ones(B, bool)))
     assert not np.asarray(masks[:, 0, 3]).any()  # give_key can't be called while holding the key
 
@@ -114,8 +118,9 @@ def test_evaluation_runner_never_teleports():
     env = KeyDoor()
     h = env.hierarchies()["paper"]
     agent = fixed_agent(0, h.num_actions)
-    runner = HierarchyRunner(env, env.default_params, h, agent, gamma=GAMMA, allow_teleport=False)
-    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), jnp.asarray([True, False]))
+    runner = HierarchyRunner(env, env.default_params, h, agent)
+    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), jnp.asarray([True, False]),
+                        gamma=GAMMA, teleport=False)
     carry = runner.reset(jax.random.PRNGKey(0), controls, B)
     bank = jnp.zeros((2, 4)).at[0, 3].set(9.0)  # root would love to call give_key
     carry2, tr, _ = runner.tick(carry, jax.random.PRNGKey(1), None, bank, controls)
@@ -131,9 +136,9 @@ def test_learner_acting_frozen_takes_its_greedy_masked_choice():
 
     env = KeyDoor()
     h = env.hierarchies()["paper"]
-    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions), gamma=GAMMA,
-                             frozen_policy="greedy", learner_acts_frozen=True)
-    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False, False]))
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions))
+    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False, False]), gamma=GAMMA,
+                        temperature=0.0, acts_frozen=True)
     carry = runner.reset(jax.random.PRNGKey(0), controls, B)
     bank = jnp.zeros((2, 4))
     # scores prefer give_key (3), then use (2); give_key is masked out while the key is held
@@ -150,10 +155,9 @@ def test_per_option_temperature_samples_the_root_and_picks_greedily_below_it():
     # sampling at 1 while the template below it picks at 0); the learner at its own entry
     env = KeyDoor()
     h = env.hierarchies()["paper"]
-    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions), gamma=GAMMA,
-                             frozen_policy="sample")
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(0, h.num_actions))
     flat = jnp.zeros((2, 512, h.num_actions)).at[:, :, 2].set(0.5)  # nearly uniform scores
-    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, True]),
+    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, True]), gamma=GAMMA,
                         temperature=jnp.asarray([1.0, 0.0]))
     picks = np.asarray(runner._frozen_pick(flat, jax.random.PRNGKey(3), controls))
     assert (picks[1] == 2).all()                        # the template: argmax, every time
@@ -166,11 +170,21 @@ def test_per_option_temperature_samples_the_root_and_picks_greedily_below_it():
     assert len(set(learner.tolist())) == h.num_actions
 
 
-def test_frozen_policy_mode_is_validated():
+def test_a_ticks_settings_come_with_its_controls_alone():
+    # the runner is built from the program's structure; gamma has no default
     env = KeyDoor()
     h = env.hierarchies()["paper"]
+    for setting, value in (("gamma", 0.9), ("frozen_policy", "sample"), ("allow_teleport", False),
+                           ("reset_on_learner_end", False), ("learner_acts_frozen", True)):
+        with pytest.raises(TypeError, match=setting):
+            HierarchyRunner(env, env.default_params, h, fixed_agent(0, 4), **{setting: value})
+    with pytest.raises(TypeError, match="gamma"):
+        Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False, False]))
+
+
+def test_frozen_policy_mode_is_validated():
     with pytest.raises(ValueError, match="frozen_policy"):
-        HierarchyRunner(env, env.default_params, h, fixed_agent(0, 4), gamma=0.9, frozen_policy="best")
+        frozen_temperature("best", 1.0, 2)
 
 
 def test_failed_condition_pops_without_reward():
@@ -183,8 +197,8 @@ def test_failed_condition_pops_without_reward():
     tpls["reach_door"] = dataclasses.replace(tpls["reach_door"], failed=lambda s, p: s.t >= 2)
     h = Hierarchy("open_door", {"open_door": ["reach_door", "use"]}, tpls, env.primitive_action_names)
     reach = h.action_index("reach_door")
-    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(reach, h.num_actions), gamma=GAMMA)
-    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False, False]))
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(reach, h.num_actions))
+    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.asarray([False, False]), gamma=GAMMA)
     carry = runner.reset(jax.random.PRNGKey(0), controls, B)
     carry = carry.replace(env_state=carry.env_state.replace(
         pos=jnp.zeros((B,), jnp.int32), door_pos=jnp.full((B,), 7)))
@@ -214,10 +228,10 @@ def test_side_cost_shapes_only_a_template_learners_reward_and_only_when_asked(sw
     cost = lambda s, p: grows * s.t.astype(jnp.float32) + 0.05  # noqa: E731
     tpls = {**h.templates, "give_key": dataclasses.replace(h.templates["give_key"], side_cost=cost)}
     h = dataclasses.replace(h, templates=tpls)
-    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(2, h.num_actions), gamma=GAMMA,
-                             frozen_policy="greedy")
+    runner = HierarchyRunner(env, env.default_params, h, fixed_agent(2, h.num_actions))
     on = None if switch is None else jnp.asarray(switch)
-    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, False]), side_cost=on)
+    controls = Controls(jnp.asarray(1), jnp.asarray(0), jnp.asarray([True, False]), gamma=GAMMA,
+                        temperature=0.0, side_cost=on)
     carry = runner.reset(jax.random.PRNGKey(0), controls, B)
     carry = carry.replace(env_state=carry.env_state.replace(pos=carry.env_state.key_pos,
                                                             t=jnp.full((B,), 3)))

@@ -326,10 +326,10 @@ def test_evaluation_tick_needs_no_learner_state():
         return jnp.broadcast_to(params, (obs.shape[0], h.num_actions))
 
     agent = Agent("fixed", init=None, act=None, update=None, policy_logits=logits)
-    runner = HierarchyRunner(env, env.default_params, h, agent, gamma=GAMMA,
-                             learner_acts_frozen=True)
+    runner = HierarchyRunner(env, env.default_params, h, agent)
     controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), jnp.asarray([True, False]),
-                        jnp.asarray(False))
+                        gamma=GAMMA, teleport=jnp.asarray(False), temperature=0.0,
+                        acts_frozen=True)
     carry = runner.reset(jax.random.PRNGKey(0), controls, 5)
     bank = jnp.asarray([[0.0, 1.0, 0.5, 0.0], [0.0, 0.0, 0.0, 0.0]])
     own = SimpleNamespace(params=jnp.asarray([9.0, 0.0, 0.0, 0.0]))

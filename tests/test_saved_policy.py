@@ -109,6 +109,21 @@ def _edit(run_dir: Path, **changes) -> None:
     path.write_text(json.dumps(meta))
 
 
+def test_a_policy_saved_with_the_runners_tick_settings_still_loads(copied, trained):
+    # policies saved while the runner held the tick's settings name them among its
+    # keyword arguments and keep the discount there, not with the evaluation
+    path = copied / "policy" / "policy.json"
+    meta = json.loads(path.read_text())
+    assert set(meta["runner"]) == {"reset_pool", "frozen_eval", "policy_memory"}
+    gamma = meta["evaluation"].pop("gamma")
+    meta["runner"].update(gamma=gamma, frozen_policy="sample", allow_teleport=True,
+                          template_temperature=1.0)
+    path.write_text(json.dumps(meta))
+    policy = load_policy(copied)
+    assert policy.gamma == gamma
+    assert policy.evaluate()["success"] == trained[1]["final_success"]
+
+
 @pytest.mark.parametrize("damage, needle", [
     (lambda d: _edit(d, format=99), "format 99"),
     (lambda d: _edit(d, kind="something"), "not a smjax policy"),

@@ -30,10 +30,10 @@ def run(h, ticks, *, agent=None, bank=None, learner=NO_OPTION, learned=None, tel
         start_pos=None, seed=0):
     """States after each of ``ticks`` ticks (and the transitions)."""
     env = KeyDoor()
-    runner = HierarchyRunner(env, env.default_params, h, agent, gamma=0.9,
-                             allow_teleport=teleport)
+    runner = HierarchyRunner(env, env.default_params, h, agent)
     learned = np.zeros(h.num_options, bool) if learned is None else np.asarray(learned)
-    controls = Controls(jnp.asarray(learner), jnp.asarray(0), jnp.asarray(learned))
+    controls = Controls(jnp.asarray(learner), jnp.asarray(0), jnp.asarray(learned), gamma=0.9,
+                        teleport=teleport)
     carry = runner.reset(jax.random.PRNGKey(seed), controls, B)
     if start_pos is not None:
         carry = carry.replace(env_state=carry.env_state.replace(pos=jnp.full((B,), start_pos)))
@@ -194,8 +194,9 @@ def test_fetch_scripted_hierarchy_stacks_blocks():
 
     env, params = smjax.make("fetch/stack2")
     h = env.hierarchies()["scripted"]
-    runner = HierarchyRunner(env, params, h, None, gamma=1.0, allow_teleport=False)
-    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), jnp.zeros(h.num_options, bool))
+    runner = HierarchyRunner(env, params, h, None)
+    controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0), jnp.zeros(h.num_options, bool),
+                        gamma=1.0, teleport=False)
     n = 4
     horizon = int(params.max_steps)
 

@@ -26,7 +26,7 @@ def _runner(reset_pool: int = 0):
     env = KeyDoor()
     h = env.hierarchies()["paper"]
     agent = make_agent("ppo", hidden_sizes=(16,))
-    return env, h, agent, HierarchyRunner(env, env.default_params, h, agent, gamma=0.9,
+    return env, h, agent, HierarchyRunner(env, env.default_params, h, agent,
                                           reset_pool=reset_pool)
 
 
@@ -35,7 +35,7 @@ _OBS = _ENV.reset_env(jax.random.PRNGKey(0), _ENV.default_params)[0]
 _BANK = jax.vmap(lambda k: _AGENT.init(k, _OBS, _H.num_actions).params)(
     jax.random.split(jax.random.PRNGKey(1), _H.num_options))
 _FROZEN = jax.jit(lambda bank, obs, learned, learner: _RUNNER.frozen_logits(
-    bank, obs, Controls(learner, jnp.asarray(0), learned)))
+    bank, obs, Controls(learner, jnp.asarray(0), learned, gamma=0.9)))
 
 
 @settings(max_examples=12, deadline=None)
@@ -54,7 +54,7 @@ def test_frozen_logits_equal_the_whole_bank_where_an_option_can_decide(learned, 
 
 def test_reset_pool_hands_out_each_start_once_before_reusing():
     env, h, agent, runner = _runner(reset_pool=5)
-    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.zeros((2,), bool))
+    controls = Controls(jnp.asarray(0), jnp.asarray(0), jnp.zeros((2,), bool), gamma=0.9)
     carry = runner.reset(jax.random.PRNGKey(0), controls, 4)
     pool_pos = np.asarray(carry.pool.state.pos)
     reset = jnp.asarray([True, False, True, True])

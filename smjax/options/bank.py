@@ -2,9 +2,9 @@
 when it acts as it will once frozen, and the frozen picks at their temperatures.
 
 A mixin of :class:`~smjax.options.runner.HierarchyRunner`, kept apart so that the tick's
-file holds the tick. It reads the runner's ``agent``, ``h`` (the hierarchy),
-``frozen_eval``, ``frozen_policy``, ``frozen_temperature``, ``template_temperature`` and
-``learner_acts_frozen``.
+file holds the tick. It reads the runner's ``agent``, ``h`` (the hierarchy) and
+``frozen_eval``; how the policies pick comes from the tick's ``Controls``
+(``temperature``; ``frozen_temperature`` gives a run's).
 """
 from __future__ import annotations
 
@@ -23,6 +23,22 @@ FROZEN_EVALS = ("auto", "learned", "all")
 def option_temperatures(root: float, templates: float, num_options: int) -> np.ndarray:
     """float32 [O]: the root's (option 0) temperature, then every template's."""
     return np.asarray([root] + [templates] * (num_options - 1), np.float32)
+
+
+def frozen_temperature(policy: str, option_temperature: float,
+                       num_options: int) -> float | np.ndarray:
+    """``Controls.temperature`` of a run whose frozen policies act by ``policy``: 0.0
+    (greedy: the argmax alone), or a sample with the root at 1 and every template at
+    ``option_temperature`` (one Python float where the two agree, else float32 [O])."""
+    if policy not in ("greedy", "sample"):
+        raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {policy!r}")
+    if not option_temperature > 0:
+        raise ValueError(f"option_temperature must be > 0, got {option_temperature}")
+    if policy == "greedy":
+        return 0.0
+    if float(option_temperature) == 1.0:
+        return 1.0
+    return option_temperatures(1.0, float(option_temperature), num_options)
 
 
 class PolicyBank:
@@ -84,29 +100,12 @@ class PolicyBank:
 
         return jax.lax.fori_loop(0, need.sum(), one, out)
 
-    def frozen_temperature_of(self, controls: Controls) -> jax.Array | float:
-        """The temperature frozen policies pick at (0: greedy): one for every option, or
-        one per option ([O], ``Controls.temperature``)."""
-        if controls.temperature is not None:
-            return controls.temperature
-        if self.frozen_policy == "greedy":
-            return 0.0
-        if self.template_temperature in (None, self.frozen_temperature):
-            return self.frozen_temperature
-        return option_temperatures(self.frozen_temperature, self.template_temperature,
-                                   self.h.num_options)
-
-    def acts_frozen(self, controls: Controls) -> bool:
-        """Whether the learner picks as it will once frozen (``Controls.acts_frozen``, else
-        as the runner was built)."""
-        return self.learner_acts_frozen if controls.acts_frozen is None else controls.acts_frozen
-
     def _frozen_pick(self, logits: jax.Array, key: jax.Array, controls: Controls,
                      option: jax.Array | None = None) -> jax.Array:
         """A frozen policy's choice from masked scores (last axis): argmax at temperature 0,
         else a sample at the temperature. ``logits`` are every option's [O, B, A], or, with
         ``option``, that one option's [B, A] (a per-option temperature then picks its own)."""
-        temperature = self.frozen_temperature_of(controls)
+        temperature = controls.temperature
         if isinstance(temperature, float):  # known when tracing: compute only that pick
             if temperature == 0.0:
                 return jnp.argmax(logits, -1)

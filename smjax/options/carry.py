@@ -1,17 +1,18 @@
 """The data the hierarchical tick carries and reports: per-environment rollout state
 (``EnvCarry``, ``ResetPool``), per-tick episode bookkeeping (``EpisodeEnds``, summed to
-``TickStats``) and the traced per-run switches (``Controls``).
+``TickStats``) and every setting of a tick (``Controls``).
 
 They live apart from the runner so that the tick's phases (``smjax.options.phases``) and
 the runner that strings them together both import them one way.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass
 from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from smjax.core.transition import Transition
@@ -94,29 +95,34 @@ class TickStats:
 
 @dataclass(frozen=True)
 class Controls:
-    """Traced per-run controls of the tick (all arrays, so one compile serves every level).
+    """Every setting of a tick: the one source of its mode (the runner fixes only the
+    program's structure). Arrays are traced, so one compile serves every level and seed;
+    the fields documented as Python values are static: a program is traced per value.
 
     learner: option id being trained (NO_OPTION: evaluation, nobody learns).
     start: option placed at the bottom of the stack at each reset (0 = root; a template
       id starts that template directly from reset states, as bottom-up training does).
     learned: bool [num_options], options whose frozen policy is in the bank.
-    teleport: bool, unlearned templates may be teleported (None: as the runner was built;
-      False turns a teleporting runner into an evaluating one without another compile).
-    continue_episodes: bool, the environment goes on when the learner's option ends (None:
-      as the runner was built); its next episode starts where the levels above call it again.
-    temperature: float, how frozen policies pick: 0 greedy (argmax), else a sample at this
-      temperature; or float [O], one per option (e.g. the root sampling at 1 while the
-      templates below it pick at 0.5); None: as the runner was built.
+    gamma: float, the discount per tick (gamma**d for a teleported call of duration d); no
+      default: the trainer's config is its one source. Traced where an array, so runs with
+      different discounts share one compile (a sweep). Joint fine-tuning gives one per
+      option (float [O]), and its record's discount is per option too.
+    teleport: bool, unlearned templates with a teleport may be called (their call jumps the
+      state); a traced False turns training into evaluation without another compile, a
+      Python False leaves the teleports out of the program.
+    continue_episodes: bool, the environment goes on when the learner's option ends; its
+      next episode starts where the levels above call it again (False: it is reset).
+    temperature: how frozen policies (and a learner acting frozen) pick: 0 greedy (argmax),
+      else a sample at this temperature; a float, or float [O], one per option (e.g. the
+      root sampling at 1 while the templates below it pick at 0.5). A Python float
+      compiles only its own pick (0.0: the argmax alone).
     side_cost: float weight (or bool), a template learner is also rewarded by this times the
       decrease of its template's ``side_cost`` (None or 0: never; fine-tuning turns it on).
-    gamma: float, the discount per tick (None: the runner's ``gamma``); traced, so runs
-      with different discounts share one compile (a sweep). Joint fine-tuning gives one
-      per option (float [O]), and its record's discount is per option too.
     acts_frozen: a Python bool, not traced: the learner picks as the bank will run it once
-      frozen (greedy or sampled, no exploration; only its params are read) instead of
-      exploring through the agent's ``act``: the gate's and evaluation's mode (None: as
-      the runner was built). Static because the two modes read different learner state
-      (evaluation has none), so they cannot share one traced program.
+      frozen (at ``temperature``, no exploration; only its params are read) instead of
+      exploring through the agent's ``act``: the gate's and evaluation's mode. Static
+      because the two modes read different learner state (evaluation has none), so they
+      cannot share one traced program.
     joint: a Python bool, not traced: every learned option learns at once (joint
       fine-tuning, ``smjax.options.joint``): the tick takes a learner state per option
       (leading axis O) instead of one learner and a bank, each learned option explores
@@ -127,10 +133,21 @@ class Controls:
     learner: jax.Array
     start: jax.Array
     learned: jax.Array
-    teleport: jax.Array | None = None
-    continue_episodes: jax.Array | None = None
-    temperature: jax.Array | None = None
-    side_cost: jax.Array | None = None
-    gamma: jax.Array | None = None
-    acts_frozen: bool | None = None
+    gamma: jax.Array | float
+    _: KW_ONLY
+    teleport: jax.Array | bool = True
+    continue_episodes: jax.Array | bool = False
+    temperature: jax.Array | np.ndarray | float = 0.0
+    side_cost: jax.Array | float | None = None
+    acts_frozen: bool = False
     joint: bool = False
+
+    def resets_on_learner_end(self) -> jax.Array | bool:
+        """Whether an environment is reset when the learner's option ends (a Python bool
+        stays one)."""
+        keep = self.continue_episodes
+        return (not keep) if isinstance(keep, bool) else ~keep
+
+    def teleports(self) -> bool:
+        """Whether the program holds the teleports at all (a Python False leaves them out)."""
+        return not (isinstance(self.teleport, bool) and not self.teleport)

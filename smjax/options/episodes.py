@@ -59,7 +59,8 @@ class FrozenLearner(NamedTuple):
 
 
 def first_episodes(runner, key, learner_params, bank, learned, learner, start, teleport,
-                   temperature, max_ticks, skip, decide, num_envs: int) -> dict:
+                   temperature, max_ticks, skip, decide, num_envs: int, *,
+                   gamma: float) -> dict:
     """Run ``num_envs`` environments of ``runner`` (a ``HierarchyRunner``) until each has
     finished one learner episode (or ``max_ticks``); each environment's first episode
     counts, so short episodes are not over-represented, and one still unfinished at
@@ -76,9 +77,12 @@ def first_episodes(runner, key, learner_params, bank, learned, learner, start, t
     ``fail_below``, the answer is certain and the episodes stop (``on``): the same
     decision, fewer ticks. The success then reported is the mean so far (unfinished
     episodes count 0), which lies on the same side of the threshold.
-    ``temperature``: float [O], how each frozen policy (and the learner) picks, 0 = greedy."""
-    controls = Controls(learner, start, learned, teleport, continue_episodes=jnp.asarray(False),
-                        temperature=temperature, acts_frozen=True)
+    ``temperature``: float [O], how each frozen policy (and the learner) picks, 0 = greedy.
+    ``gamma``: the run's discount (the ticks' ``Controls`` hold one; no record is kept
+    here, so it changes no result)."""
+    controls = Controls(learner, start, learned, gamma=gamma, teleport=teleport,
+                        continue_episodes=jnp.asarray(False), temperature=temperature,
+                        acts_frozen=True)
     k_reset, key = jax.random.split(key)
     carry = runner.reset(k_reset, controls, num_envs)
     on, pass_at, fail_below = decide
@@ -119,11 +123,11 @@ def first_episodes(runner, key, learner_params, bank, learned, learner, start, t
 SEED_AXES = (0, 0, 0, 0, 0, 0, None, 0, None, 0, 0)
 
 
-def seed_batched_episodes(runner):
-    """``first_episodes`` of ``runner`` compiled over a leading seed axis:
-    ``f(key, learner_params, bank, learned, learner, start, teleport, temperature,
-    max_ticks, skip, decide, num_envs)``."""
+def seed_batched_episodes(runner, gamma: float):
+    """``first_episodes`` of ``runner`` (at discount ``gamma``) compiled over a leading
+    seed axis: ``f(key, learner_params, bank, learned, learner, start, teleport,
+    temperature, max_ticks, skip, decide, num_envs)``."""
     def episodes(*args):
-        return first_episodes(runner, *args)
+        return first_episodes(runner, *args, gamma=gamma)
 
     return jax.jit(jax.vmap(episodes, in_axes=SEED_AXES + (None,)), static_argnums=(11,))

@@ -57,33 +57,19 @@ class TickPlan(NamedTuple):
 
 
 class HierarchyRunner(PolicyBank, EpisodeStarts):
-    """Compiles a hierarchy over an environment into batched tick/reset functions."""
+    """Compiles a hierarchy over an environment into batched tick/reset functions.
 
-    def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, gamma: float,
-                 frozen_policy: str = "greedy", allow_teleport: bool = True,
-                 reset_on_learner_end: bool = True, frozen_temperature: float = 1.0,
-                 template_temperature: float | None = None,
-                 learner_acts_frozen: bool = False, reset_pool: int = 0,
+    What it is built from fixes the program's structure (the environment, hierarchy and
+    agent; ``reset_pool``: episode starts generated ahead, 0 for none; ``frozen_eval``: how
+    the policy bank is evaluated; ``policy_memory``: what the policies see); every setting
+    of a tick (discount, teleports, episodes, temperatures, acting frozen) comes with the
+    tick's ``Controls``.
+    """
+
+    def __init__(self, env, env_params, hierarchy: Hierarchy, agent, *, reset_pool: int = 0,
                  frozen_eval: str = "auto", policy_memory: str = "none"):
-        if frozen_policy not in ("greedy", "sample"):
-            raise ValueError(f"frozen_policy must be 'greedy' or 'sample', got {frozen_policy!r}")
         self.env, self.env_params, self.h, self.agent = env, env_params, hierarchy, agent
         check_success(hierarchy, env, env_params)
-        self.gamma = float(gamma)
-        self.frozen_policy = frozen_policy
-        if not frozen_temperature > 0:
-            raise ValueError(f"frozen_temperature must be > 0, got {frozen_temperature}")
-        self.frozen_temperature = float(frozen_temperature)
-        # the templates' own (the root keeps ``frozen_temperature``); None: the same
-        if template_temperature is not None and not template_temperature > 0:
-            raise ValueError(f"template_temperature must be > 0, got {template_temperature}")
-        self.template_temperature = (None if template_temperature is None
-                                     else float(template_temperature))
-        self.allow_teleport = bool(allow_teleport)
-        self.reset_on_learner_end = bool(reset_on_learner_end)
-        # The learner picks as the bank will run it once frozen (greedy or sampled, per
-        # ``frozen_policy``) instead of exploring: the engine's level acceptance gate.
-        self.learner_acts_frozen = bool(learner_acts_frozen)
         if isinstance(reset_pool, bool) or not isinstance(reset_pool, int) or reset_pool < 0:
             raise ValueError(f"reset_pool must be an integer >= 0, got {reset_pool!r}")
         self.reset_pool = reset_pool
@@ -124,10 +110,10 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
         return template_fields.per_option(self.templates, self.env_params, state,
                                           "initiation", True, bool)
 
-    def teleports_on(self, controls: Controls) -> jax.Array:
+    @staticmethod
+    def teleports_on(controls: Controls) -> jax.Array:
         """bool: unlearned templates with a teleport jump (else they are not callable)."""
-        allowed = jnp.asarray(self.allow_teleport)
-        return allowed if controls.teleport is None else allowed & controls.teleport
+        return jnp.asarray(controls.teleport)
 
     def deciding(self, learned: jax.Array, teleport_on: jax.Array | bool) -> jax.Array:
         """bool [num_options]: options that choose when on the stack (besides the learner):
@@ -138,10 +124,10 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
                                        jnp.asarray(self.has_teleport), teleport_on)
 
     def callable_options(self, learned: jax.Array, learner: jax.Array,
-                         teleport: jax.Array | bool | None = None) -> jax.Array:
-        """bool [num_options]: options that can run now (learned, the learner, or realisable)."""
+                         teleport: jax.Array | bool) -> jax.Array:
+        """bool [num_options]: options that can run now (learned, the learner, or realisable;
+        ``teleport``: whether a teleport realises an unlearned template now)."""
         ids = jnp.arange(self.h.num_options)
-        teleport = self.allow_teleport if teleport is None else teleport
         realise = jnp.asarray(self.has_controller) | (jnp.asarray(self.has_teleport) & teleport)
         return learned | realise | (ids == learner)
 
@@ -176,7 +162,7 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
         decision = jax.vmap(lambda s, f, l: phases.decide(
             s, f, l, learner=controls.learner, learned=deciding, pushable=pushable,
             callable_=callable_, num_primitives=self.P))(carry.stack, frozen, own)
-        state_in, action, teleported = self._realise(decision, carry.env_state, teleport_on,
+        state_in, action, teleported = self._realise(decision, carry.env_state, controls,
                                                       k_ctrl, k_tp)
         return TickPlan(act, learner_mask, memory, decision, state_in, action, teleported)
 
@@ -200,8 +186,7 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
         sat, stop = template_fields.stop_conditions(self.templates, self.env_params, state)
         popped = phases.pop(decision.stack, stop, self.k_max, controls.learner)
 
-        gamma = self.gamma if controls.gamma is None else controls.gamma
-        discount = phases.tick_discount(teleported, self.nominal, gamma)
+        discount = phases.tick_discount(teleported, self.nominal, controls.gamma)
         learner_idx = jnp.maximum(controls.learner, 0)
         on = options_on(decision.stack, self.h.num_options)  # before the pops
         shaping = template_fields.side_costs(self.templates, self.env_params, carry.env_state,
@@ -215,7 +200,7 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
             info_success=template_fields.task_success(self.h.success, self.env_params, state,
                                                       info),
             learner=controls.learner, start=controls.start,
-            reset_on_learner_end=self.resets_on_learner_end(controls))
+            reset_on_learner_end=controls.resets_on_learner_end())
         if controls.joint:  # every option's own record (joint.py)
             transition = joint.option_transitions(
                 carry.obs, act, learner_mask, decision.chose, controls.learned,
@@ -268,7 +253,7 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
         else:
             learner = jnp.maximum(controls.learner, 0)
             own = () if carry.hidden is None else (carry.hidden[:, learner],)
-            if self.acts_frozen(controls):
+            if controls.acts_frozen:
                 act = self._act_frozen(learner_state, carry.obs, learner_mask, k_act, controls,
                                        *own)
             else:
@@ -315,18 +300,18 @@ class HierarchyRunner(PolicyBank, EpisodeStarts):
             out.append(jnp.asarray(ids)[child])
         return jnp.stack(out).astype(jnp.int32)
 
-    def _realise(self, decision: phases.Decision, env_state, teleport_on: jax.Array,
+    def _realise(self, decision: phases.Decision, env_state, controls: Controls,
                  k_ctrl: jax.Array, k_tp: jax.Array):
         """(state to step from, action [B, ...], teleported [B]): the primitive, overwritten
         by a scripted controller's action, or by a teleport's jump and action (teleports
-        only where this tick allows them)."""
+        only where this tick allows them; a Python ``teleport=False`` compiles none)."""
         action = primitive_action(decision.primitive, self.action_shape, self.action_dtype)
         if self.controller_families:
             action = self.run_family(self.controller_families, k_ctrl, env_state,
                                       decision.scripted, action, controls=True)
         teleported = decision.teleported
-        if self.allow_teleport and self.teleport_families:
-            teleported = jnp.where(teleport_on, teleported, NO_OPTION)
+        if controls.teleports() and self.teleport_families:
+            teleported = jnp.where(self.teleports_on(controls), teleported, NO_OPTION)
             env_state, action = self.run_family(self.teleport_families, k_tp, env_state,
                                                  teleported, action, controls=False)
         return env_state, action, teleported

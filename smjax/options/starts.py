@@ -4,8 +4,7 @@ an episode ends.
 
 A mixin of :class:`~smjax.options.runner.HierarchyRunner`, kept apart so that the tick's
 file holds the tick. It reads the runner's ``env``, ``env_params``, ``h`` (the hierarchy),
-``D`` (the stack depth), ``memory``, ``memory_size``, ``reset_pool`` and
-``reset_on_learner_end``.
+``D`` (the stack depth), ``memory``, ``memory_size`` and ``reset_pool``.
 """
 from __future__ import annotations
 
@@ -92,9 +91,3 @@ class EpisodeStarts:
             pool=pool,
             hidden=carry.hidden,  # the tick's memory update follows (``_next_memory``)
         )
-
-    def resets_on_learner_end(self, controls: Controls) -> jax.Array | bool:
-        """Whether an environment is reset when the learner's option ends."""
-        if controls.continue_episodes is None:
-            return self.reset_on_learner_end
-        return ~controls.continue_episodes

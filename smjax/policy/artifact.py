@@ -141,7 +141,7 @@ def policy_meta(runner, runner_settings: dict, *, task: str, registered: bool,
     """policy.json's description of a run's policy, but its seeds and config (each point
     of a sweep has its own). ``runner_settings``: the keyword arguments ``runner`` was
     built with; ``learner``: ``{"algo", "agent"}``; ``evaluation``: ``{"policy",
-    "option_temperature", "episodes", "max_ticks"}`` of the final evaluation."""
+    "option_temperature", "gamma", "episodes", "max_ticks"}`` of the final evaluation."""
     env_name, _, task_name = task.rpartition(":")[2].partition("/")
     return {"task": task, "env": env_name, "task_name": task_name, "registered": registered,
             "env_overrides": env_overrides, "hierarchy": hierarchy,

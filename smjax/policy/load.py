@@ -15,6 +15,9 @@ from smjax.policy.artifact import (PolicyError, observation_spec, policy_folder,
 from smjax.policy.hierarchies import declared_identity, hierarchy_named
 from smjax.policy.saved import PolicyParams, SavedPolicy
 
+# settings older policies saved with the runner's (``runner_structure``)
+_TICK_SETTINGS = ("gamma", "frozen_policy", "allow_teleport", "template_temperature")
+
 
 def load_policy(path, *, task: str | None = None, env: tuple | None = None,
                 hierarchy: Hierarchy | None = None) -> SavedPolicy:
@@ -30,7 +33,7 @@ def load_policy(path, *, task: str | None = None, env: tuple | None = None,
     try:
         agent = make_agent(learner["algo"], layout=env.observation_layout(env_params),
                            **learner["agent"])
-        runner = HierarchyRunner(env, env_params, h, agent, **meta["runner"])
+        runner = HierarchyRunner(env, env_params, h, agent, **runner_structure(meta["runner"]))
     except (TypeError, ValueError) as err:
         raise PolicyError(f"{where}: its learner cannot be built by this smjax ({err})") from None
     seen = observation_spec(runner)
@@ -51,6 +54,14 @@ def load_policy(path, *, task: str | None = None, env: tuple | None = None,
     arrays = jax.tree.map(jnp.asarray, restore_tree(like, read_arrays(path, meta), where))
     return SavedPolicy(meta, runner, PolicyParams(arrays["bank"], arrays["learned"]),
                        arrays["eval_keys"])
+
+
+def runner_structure(settings: dict) -> dict:
+    """The runner's keyword arguments among a policy's saved runner settings: those of
+    policies saved before a tick's settings came with its ``Controls`` also name the
+    tick's discount and frozen-policy mode (the saved policy reads them from its
+    evaluation's description now)."""
+    return {k: v for k, v in settings.items() if k not in _TICK_SETTINGS}
 
 
 def _environment(meta: dict, path, task: str | None, given: tuple | None):

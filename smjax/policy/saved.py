@@ -49,9 +49,13 @@ class SavedPolicy:
         # how the frozen policies pick: as in the run's final evaluation
         self.temperature = eval_temperatures(evaluation["policy"], self.hierarchy.num_options,
                                              evaluation["option_temperature"])
+        # the run's discount (policies saved before it was part of the evaluation's
+        # description kept it with the runner's settings)
+        self.gamma = float(evaluation["gamma"] if "gamma" in evaluation
+                           else meta["runner"]["gamma"])
         self._all = params
         self._eval_keys = eval_keys
-        self._episodes = seed_batched_episodes(runner)
+        self._episodes = seed_batched_episodes(runner, self.gamma)
         self._step = jax.jit(self.step)
 
     def __repr__(self) -> str:
@@ -72,8 +76,9 @@ class SavedPolicy:
         """The tick's switches for acting: nobody learns, no teleports, the frozen
         policies at the evaluation's temperatures, episodes that run to the task's end."""
         return Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), learned,
-                        jnp.asarray(False), continue_episodes=jnp.asarray(False),
-                        temperature=self.temperature, acts_frozen=True)
+                        gamma=self.gamma, teleport=jnp.asarray(False),
+                        continue_episodes=jnp.asarray(False), temperature=self.temperature,
+                        acts_frozen=True)
 
     def reset(self, key: jax.Array, num_envs: int = 1) -> EnvCarry:
         """Fresh episodes of ``num_envs`` environments, the root on every stack."""

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 from smjax.agents.option_batch import joint_batch, options_update
 from smjax.agents.smdp import carry_pending
 from smjax.core.env import select_tree
+from smjax.options.bank import frozen_temperature
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
     EVAL_TEMPERATURES, early_stop_bounds, eval_temperatures, seed_batched_episodes)
@@ -60,17 +61,17 @@ class Engine:
         self.env, self.env_params, self.h, self.agent, self.cfg = env, env_params, hierarchy, agent, cfg
         mode = frozen_mode(cfg, agent)
         self.frozen_policy = mode
-        # One runner for training, the gate and evaluation; what differs is per call
-        # (``Controls``): the gate and evaluation run the learner as it will be frozen
-        # (``acts_frozen``), episodes that reset where the learner's option ends, and
-        # teleports as a traced switch (the gate: the level's own setting, teleports above,
-        # calls from resets; evaluation: the final product alone, no teleports, no
-        # learner; scripted leaf controllers run in both), so both share one program.
-        # (a saved policy rebuilds its runner from these, so it acts as evaluated here)
-        self.runner_settings = dict(gamma=cfg.gamma, frozen_policy=mode, allow_teleport=True,
-                                    reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
-                                    policy_memory=cfg.policy_memory,
-                                    template_temperature=cfg.option_temperature)
+        # The ticks' settings from the config, computed once and passed in every
+        # ``Controls``: the discount, and the temperature frozen policies pick at. One
+        # runner serves training, the gate and evaluation; the gate and evaluation run the
+        # learner as it will be frozen (``acts_frozen``) with teleports as a traced switch
+        # (the gate: the level's own; evaluation: none), so both share one program.
+        self.gamma = float(cfg.gamma)
+        self.temperature = frozen_temperature(mode, cfg.option_temperature,
+                                              hierarchy.num_options)
+        # the runner's structure (a saved policy rebuilds its runner from these)
+        self.runner_settings = dict(reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
+                                    policy_memory=cfg.policy_memory)
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, **self.runner_settings)
         # what the policies see (one compiled program: run op by op, an environment's reset
         # compiles dozens of tiny programs before training starts)
@@ -80,7 +81,7 @@ class Engine:
         self.chunk = jax.jit(jax.vmap(self.seed_chunk), donate_argnums=(0,))
         self.joint_chunk = jax.jit(jax.vmap(self._joint_chunk), donate_argnums=(0,))
         # the gate's and the evaluation's episodes (``first_episodes``), one program
-        self.episodes = seed_batched_episodes(self.runner)
+        self.episodes = seed_batched_episodes(self.runner, self.gamma)
         self._compiled_episodes: dict[tuple, Any] = {}
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
@@ -132,7 +133,8 @@ class Engine:
         return self._warm(states, params)
 
     def _reset(self, key: jax.Array, start: jax.Array) -> EnvCarry:
-        controls = Controls(jnp.asarray(NO_OPTION), start, jnp.zeros((self.h.num_options,), bool))
+        controls = Controls(jnp.asarray(NO_OPTION), start, jnp.zeros((self.h.num_options,), bool),
+                            gamma=self.gamma, temperature=self.temperature)
         return self.runner.reset(key, controls, self.cfg.num_envs)
 
     def joint_state(self, learners, bank, reset_keys: jax.Array, keys: jax.Array) -> SeedState:
@@ -181,8 +183,9 @@ class Engine:
         (newest first) and episodes (0 while not full); the host reduces them in float64
         (``SuccessWindow.push`` says why there). Without
         ``windows`` (a benchmark timing the chunk alone) those outputs are None."""
-        controls = Controls(tick.learner, tick.start, learned, tick.teleport,
-                            tick.continue_episodes, side_cost=tick.side_cost, gamma=tick.gamma)
+        controls = Controls(tick.learner, tick.start, learned, gamma=tick.gamma,
+                            teleport=tick.teleport, continue_episodes=tick.continue_episodes,
+                            temperature=self.temperature, side_cost=tick.side_cost)
         return self._updates(state, active, controls, bank, self._learn, windows, sizes)
 
     def _joint_chunk(self, state: SeedState, active, learned, side_cost, gamma, windows,
@@ -195,8 +198,9 @@ class Engine:
         arguments and the outputs are ``seed_chunk``'s (the learner metrics per option:
         [U, O])."""
         controls = Controls(jnp.asarray(NO_OPTION), jnp.asarray(0, jnp.int32), learned,
-                            jnp.asarray(False), jnp.asarray(False), side_cost=side_cost,
-                            gamma=gamma, acts_frozen=True, joint=True)
+                            gamma=gamma, teleport=jnp.asarray(False),
+                            continue_episodes=jnp.asarray(False), temperature=self.temperature,
+                            side_cost=side_cost, acts_frozen=True, joint=True)
         return self._updates(state, active, controls, None, self._learn_joint, windows, sizes)
 
     def _update(self, learner, pending, traj, key):
