@@ -447,7 +447,7 @@ import builtins, errno, io, os, sys, time
 from pathlib import Path
 sys.path.insert(0, {tests!r})
 from hier_env import make_keydoor
-from smjax.cli import main
+from smjax.cli import entry  # the smjax command
 from smjax.core.registry import register
 
 checkpoints, marker = Path({out!r}).resolve() / "checkpoints", Path({marker!r})
@@ -494,7 +494,7 @@ def ro_mkdir(path, *a, **k):
 builtins.open = io.open = ro_open
 os.open, os.mkdir = ro_os_open, ro_mkdir
 register("test/keydoor", lambda: make_keydoor())
-sys.exit(main(["train", "test/keydoor", "--seeds", "2", "--out", {out!r}, "--quiet",
+sys.exit(entry(["train", "test/keydoor", "--seeds", "2", "--out", {out!r}, "--quiet",
                *[f"--set={{k}}={{v}}" for k, v in {cfg!r}.items()]]))
 """
 
