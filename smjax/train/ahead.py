@@ -7,10 +7,10 @@ minutes later, and compiling each where it is first needed stops training for as
 accelerator) they start with the level chunk's compile, two at a time: the host's cores
 are otherwise idle while the device trains. On a CPU they start after the first level
 chunk, one at a time: XLA's compile already keeps a CPU's cores busy, so they only gain
-what the training chunks leave idle. They are the very
-programs the run would compile when first needed (same function, shapes, dtypes and
-layout), so results do not change; where one is needed before its compile has finished,
-the run waits for it, and that wait is its compile time.
+what the training chunks leave idle. They are the very programs the run would compile
+when first needed (same function, shapes, dtypes and layout), so results do not change;
+where one is needed before its compile has finished, the run waits for it, and that wait
+is its compile time.
 
 On by default with one process (several processes keep compiling where needed, in the
 same order on each); ``SMJAX_COMPILE_AHEAD=0`` turns it off.
