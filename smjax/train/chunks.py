@@ -7,7 +7,6 @@ joint fine-tuning run ``Engine.joint_chunk``. Each program is compiled once per 
 """
 from __future__ import annotations
 
-import time
 from typing import Callable
 
 import jax
@@ -68,12 +67,8 @@ class ChunkRunner:
         args = (a.state, slots.per_seed(active, bool), a.bank, a.learned, tick,
                 (a.window, a.task_window),
                 slots.per_seed([[c.window, c.task_window] for c in controls], jnp.int32))
-        compile_s = 0.0
-        if self.level_program is None:  # one compile serves every level (ids are traced)
-            t0 = time.perf_counter()
-            self.level_program = self.engine.compile("chunk", self.engine.chunk, args,
-                                                     donate=(0,))
-            compile_s = time.perf_counter() - t0
+        # one compile serves every level (ids are traced)
+        self.level_program, compile_s = resolve(self.level_program, args, self._compile_level)
         state, stats, metrics, (window, task_window), windows = self.level_program(*args)
         stats, windows = dist.gather((stats, windows))  # [S, U, ...], the same on every process
         metrics = float64(dist.gather(metrics)) if self.metrics else None
@@ -81,6 +76,9 @@ class ChunkRunner:
             raise NonFiniteError(f"non-finite learner parameters in {describe()}")
         slots.arrays = a.replace(state=state, window=window, task_window=task_window)
         return ChunkOut(stats, windows, metrics), compile_s
+
+    def _compile_level(self, args: tuple):
+        return self.engine.compile("chunk", self.engine.chunk, args, donate=(0,))
 
     def joint_args(self, seeds: list[int], side_cost, gammas, sizes) -> tuple:
         """Joint fine-tuning's chunk's arguments: these seeds run, the others keep their
