@@ -12,6 +12,7 @@ from hier_env import make_keydoor
 from smjax.core.timeline import TIMELINE
 from smjax.train import TrainConfig
 from smjax.train.ahead import CompileAhead, Pending, abstract, resolve, signature
+from smjax.train import engine as engine_module
 from smjax.train.run import run
 from test_finetune import SMALL, _strip_timing
 
@@ -22,18 +23,36 @@ def _ahead_labels() -> dict:
     return {k: v[1] for k, v in TIMELINE.jax.items() if k.startswith("compile ahead")}
 
 
-def test_a_run_compiled_ahead_gives_the_numbers_of_one_compiled_where_needed(monkeypatch):
+@pytest.mark.parametrize("from_start", [False, True], ids=["cpu", "accelerator"])
+def test_a_run_compiled_ahead_gives_the_numbers_of_one_compiled_where_needed(monkeypatch,
+                                                                            from_start):
+    # each backend's way (``CompileAhead.for_backend``): on an accelerator the level chunk
+    # compiles from the trainer's construction, for shapes traced before its state exists
+    monkeypatch.setattr(CompileAhead, "for_backend",
+                        classmethod(lambda cls: cls(3 if from_start else 1, from_start=from_start)))
     cfg = TrainConfig(**JOINT_SMALL)
     monkeypatch.setenv("SMJAX_COMPILE_AHEAD", "0")
     before = _ahead_labels()
     where_needed = run(make_keydoor(), cfg, [0], progress=False)
     assert _ahead_labels() == before  # off: nothing compiled on a thread
     monkeypatch.delenv("SMJAX_COMPILE_AHEAD")
+    compiles = []
+    real = engine_module.compile_program
+
+    def counted(jitted, args, name, *rest):
+        compiles.append(name)
+        return real(jitted, args, name, *rest)
+
+    monkeypatch.setattr(engine_module, "compile_program", counted)
     ahead = run(make_keydoor(), cfg, [0], progress=False)
     compiled = _ahead_labels()
-    # the gate's (and evaluation's) episodes program and joint fine-tuning's chunk
+    # the gate's (and evaluation's) episodes program, joint fine-tuning's chunk and, from
+    # the start, the level chunk
     assert {k: n - before.get(k, 0) for k, n in compiled.items()} == {
-        "compile ahead (a thread): episodes-16": 1, "compile ahead (a thread): joint_chunk": 1}
+        "compile ahead (a thread): episodes-16": 1, "compile ahead (a thread): joint_chunk": 1
+    } | ({"compile ahead (a thread): level_chunk": 1} if from_start else {})
+    # each compiled once: the arguments compiled for are those the run calls them with
+    assert sorted(compiles) == ["chunk", "episodes-16", "joint_chunk"]
     assert _strip_timing(ahead) == _strip_timing(where_needed)
 
 

@@ -9,6 +9,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import smjax
 from smjax.envs.craft import constants as C
@@ -128,3 +130,26 @@ def test_fixed_map_reproduces_the_same_world_every_reset():
     _, after, _, _, trunc, _ = env.step(jax.random.PRNGKey(9), state, jnp.int32(0), params)
     assert bool(trunc)
     np.testing.assert_array_equal(np.asarray(after.grid), grids[0])
+
+
+def fisher_yates_prefix(u: np.ndarray, n: int) -> list[int]:
+    """The first len(u) entries of a Fisher-Yates shuffle of [0, n), on an explicit list,
+    draw t taking position t + floor(u_t (n - t)) (the float32 product, as generation's)."""
+    values = list(range(n))
+    for t, ut in enumerate(u):
+        j = t + min(int(np.float32(ut) * np.float32(n - t)), n - t - 1)
+        values[t], values[j] = values[j], values[t]
+    return values[:len(u)]
+
+
+@settings(max_examples=200, deadline=None)
+@given(u=st.lists(st.floats(0.0, 1.0, exclude_max=True, width=32), min_size=1, max_size=21),
+       n=st.integers(21, 100))
+def test_partial_shuffle_is_a_fisher_yates_prefix_on_an_explicit_list(u, n):
+    u = np.asarray(u, np.float32)
+    got = _partial_shuffle(jnp.asarray(u), jnp.int32(n))
+    assert np.asarray(got).tolist() == fisher_yates_prefix(u, n)
+    assert len(set(np.asarray(got).tolist())) == len(u)  # distinct cells
+
+
+_partial_shuffle = jax.jit(reset.partial_shuffle)

@@ -1,16 +1,20 @@
 """Programs a run needs later, compiled on a thread while its first programs train.
 
-A run compiles its level chunk first and runs it at once; the gate's episodes program,
-joint fine-tuning's chunk and the final evaluation's program are needed seconds or
-minutes later, and compiling each where it is first needed stops training for as long.
-``CompileAhead`` compiles them on background threads instead. With a GPU (or another
-accelerator) they start with the level chunk's compile, two at a time: the host's cores
-are otherwise idle while the device trains. On a CPU they start after the first level
-chunk, one at a time: XLA's compile already keeps a CPU's cores busy, so they only gain
-what the training chunks leave idle. They are the very programs the run would compile
-when first needed (same function, shapes, dtypes and layout), so results do not change;
-where one is needed before its compile has finished, the run waits for it, and that wait
-is its compile time.
+A run's largest program, its level chunk, takes longer to compile than everything the run
+does before its first chunk (the engine's and the trainer's small programs: resets, learner
+inits, copies); the gate's episodes program, joint fine-tuning's chunk and the final
+evaluation's program are needed seconds or minutes later, and compiling each where it is
+first needed stops training for as long. ``CompileAhead`` compiles them on background
+threads instead (``for_backend``). With a GPU (or another accelerator) the level chunk
+starts as soon as the trainer knows its arguments' shapes (before it builds them), beside
+the small programs on the main thread, and the other three follow when those are done,
+on three threads in all: the host's cores are otherwise idle while the device trains. On
+a CPU the other three start after the first level chunk, one at a time, and the level
+chunk compiles where it is first run: XLA's compile already keeps a CPU's cores busy, so
+compiles there only gain what the training chunks leave idle. They are the very programs the run would
+compile when first needed (same function, shapes, dtypes and layout), so results do not
+change; where one is needed before its compile has finished, the run waits for it, and
+that wait is its compile time.
 
 On by default with one process (several processes keep compiling where needed, in the
 same order on each); ``SMJAX_COMPILE_AHEAD=0`` turns it off.
@@ -50,6 +54,22 @@ def abstract(tree):
     return jax.tree.map(one, tree)
 
 
+def placed(shapes, sharding):
+    """``shapes`` (``jax.eval_shape``'s) laid out by ``sharding``: the arguments of a program
+    compiled before the arrays it will run on exist."""
+    return jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding,
+                                                       weak_type=x.weak_type), shapes)
+
+
+def arguments(make: Callable[[Any], Any], state):
+    """``make(state)``: a program's arguments from the run's state; where ``state`` holds
+    only shapes (``placed``), their shapes, from tracing ``make`` (nothing runs)."""
+    leaves = jax.tree.leaves(state)
+    if not leaves or not isinstance(leaves[0], jax.ShapeDtypeStruct):
+        return make(state)
+    return placed(jax.eval_shape(make, state), leaves[0].sharding)
+
+
 class Pending(NamedTuple):
     """A program being compiled ahead for arguments of this ``signature``."""
     future: Future
@@ -59,21 +79,34 @@ class Pending(NamedTuple):
 class CompileAhead:
     """Background threads that compile programs, in the order submitted.
 
-    ``threads``: how many programs compile at once. A run that stops early (an error,
-    Ctrl-C) cancels the compiles not yet started; a thread cannot be stopped inside XLA's
-    compile, so the interpreter waits for those under way before it exits (a daemon
-    thread left running while it shuts down aborts the process). The ``smjax`` command
-    does not wait: it exits at once (``compiling``)."""
+    ``threads``: how many programs compile at once. A thread ends when nothing is left to
+    compile, so an ahead that is never closed keeps no thread waiting. A run that stops
+    early (an error, Ctrl-C) cancels the compiles not yet started; a thread cannot be
+    stopped inside XLA's compile, so the interpreter waits for those under way before it
+    exits (a daemon thread left running while it shuts down aborts the process). The
+    ``smjax`` command does not wait: it exits at once (``compiling``)."""
 
-    def __init__(self, threads: int = 1, enabled: bool | None = None):
+    def __init__(self, threads: int = 1, enabled: bool | None = None, from_start: bool = False):
+        """``from_start``: the trainer submits its level chunk as soon as it knows the
+        shapes, to compile beside its small programs (worth it only where the host has
+        cores to spare: on two CPU cores two compiles at once take longer than one after
+        the other)."""
         if enabled is None:
             enabled = (os.environ.get("SMJAX_COMPILE_AHEAD", "1").strip().lower()
                        not in ("0", "false", "off", "no") and jax.process_count() == 1)
-        self.on, self.threads = bool(enabled), threads
+        self.on, self.threads, self.from_start = bool(enabled), threads, from_start
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
-        self._started = False
-        self._busy, self._lock = 0, threading.Lock()  # compiles under way
+        self._lock = threading.Lock()
+        self._workers = self._busy = 0  # threads alive; compiles under way
         _LIVE.add(self)
+
+    @classmethod
+    def for_backend(cls) -> "CompileAhead":
+        """On a CPU one thread, after the first chunk (its cores compile and train); beside
+        an accelerator three, from the start (the level chunk, then the gate's and joint
+        fine-tuning's programs at once)."""
+        on_cpu = jax.default_backend() == "cpu"
+        return cls(1 if on_cpu else 3, from_start=not on_cpu)
 
     def submit(self, label: str, compile_fn: Callable[[Any], Any], args) -> Pending | None:
         """``compile_fn(abstract(args))`` on a thread (None where compiling ahead is off);
@@ -82,15 +115,24 @@ class CompileAhead:
         if not self.on:
             return None
         future: Future = Future()
-        self._queue.put((future, label, compile_fn, abstract(args)))
-        if not self._started:
-            self._started = True
-            for _ in range(self.threads):
+        with self._lock:
+            self._queue.put((future, label, compile_fn, abstract(args)))
+            if self._workers < self.threads:
+                self._workers += 1
                 threading.Thread(target=self._work, name="smjax-compile-ahead").start()
         return Pending(future, signature(args))
 
+    def _next(self):
+        """The next program to compile, or None (the thread ends: nothing is queued)."""
+        with self._lock:
+            try:
+                return self._queue.get_nowait()
+            except queue.Empty:
+                self._workers -= 1
+                return None
+
     def _work(self) -> None:
-        while (item := self._queue.get()) is not None:
+        while (item := self._next()) is not None:
             future, label, compile_fn, shapes = item
             if not future.set_running_or_notify_cancel():
                 continue
@@ -109,15 +151,12 @@ class CompileAhead:
     def close(self) -> None:
         """Cancel what has not started; the threads end after the compiles under way."""
         self.on = False
-        while True:
-            try:
-                item = self._queue.get_nowait()
-            except queue.Empty:
-                break
-            if item is not None:
-                item[0].cancel()
-        for _ in range(self.threads):
-            self._queue.put(None)
+        with self._lock:
+            while True:
+                try:
+                    self._queue.get_nowait()[0].cancel()
+                except queue.Empty:
+                    break
 
 
 _LIVE: "weakref.WeakSet[CompileAhead]" = weakref.WeakSet()

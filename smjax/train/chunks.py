@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.train import distributed as dist
-from smjax.train.ahead import CompileAhead, resolve
+from smjax.train.ahead import CompileAhead, arguments, resolve
 from smjax.train.engine import ChunkControls
 from smjax.train.seed_arrays import NonFiniteError, all_finite
 from smjax.train.slots import Slots
@@ -56,17 +56,29 @@ class ChunkRunner:
                              joint_learned=tuned.joint_learned),
                 compile_s + seconds)
 
-    def level(self, controls: list[SeedControls], active: list[bool], describe):
-        """The level chunk for the ``active`` seeds (levels and fine-tuning turns)."""
-        a, slots = self.slots.arrays, self.slots
+    def level_args(self, controls: list[SeedControls], active: list[bool], a) -> tuple:
+        """The level chunk's arguments on the state ``a`` (``TrainArrays``)."""
+        slots = self.slots
         column = lambda name, dtype: slots.per_seed(  # noqa: E731
             [getattr(c, name) for c in controls], dtype)
         tick = ChunkControls(column("option", jnp.int32), column("start", jnp.int32),
                              column("teleport", bool), column("keep_episodes", bool),
                              column("side_cost", jnp.float32), column("gamma", jnp.float32))
-        args = (a.state, slots.per_seed(active, bool), a.bank, a.learned, tick,
+        return (a.state, slots.per_seed(active, bool), a.bank, a.learned, tick,
                 (a.window, a.task_window),
                 slots.per_seed([[c.window, c.task_window] for c in controls], jnp.int32))
+
+    def level_ahead(self, ahead: CompileAhead, controls: list[SeedControls], shapes) -> None:
+        """Compile the level chunk on ``ahead``'s thread, for the state's ``shapes`` (before
+        the state exists)."""
+        if self.level_program is None and ahead.on:
+            args = self.level_args(controls, [True] * len(controls), shapes)
+            self.level_program = ahead.submit("level_chunk", self._compile_level, args)
+
+    def level(self, controls: list[SeedControls], active: list[bool], describe):
+        """The level chunk for the ``active`` seeds (levels and fine-tuning turns)."""
+        a, slots = self.slots.arrays, self.slots
+        args = self.level_args(controls, active, a)
         # one compile serves every level (ids are traced)
         self.level_program, compile_s = resolve(self.level_program, args, self._compile_level)
         state, stats, metrics, (window, task_window), windows = self.level_program(*args)
@@ -80,21 +92,23 @@ class ChunkRunner:
     def _compile_level(self, args: tuple):
         return self.engine.compile("chunk", self.engine.chunk, args, donate=(0,))
 
-    def joint_args(self, seeds: list[int], side_cost, gammas, sizes) -> tuple:
+    def joint_args(self, seeds: list[int], side_cost, gammas, sizes, a=None) -> tuple:
         """Joint fine-tuning's chunk's arguments: these seeds run, the others keep their
-        state."""
-        a, slots = self.slots.arrays, self.slots
+        state (``a``: the state, default the slots')."""
+        slots = self.slots
+        a = slots.arrays if a is None else a
         return (a.joint, slots.per_seed([s in seeds for s in range(len(slots))], bool),
                 a.learned, slots.per_seed(side_cost, jnp.float32),
                 slots.per_seed(gammas, jnp.float32), (a.window, a.task_window),
                 slots.per_seed(sizes, jnp.int32))
 
-    def joint_ahead(self, ahead: CompileAhead, side_cost, gammas, sizes) -> None:
-        """Compile joint fine-tuning's chunk on ``ahead``'s thread (its inputs' shapes are
-        known from the start: the joint state is built with the trainer)."""
+    def joint_ahead(self, ahead: CompileAhead, side_cost, gammas, sizes, a) -> None:
+        """Compile joint fine-tuning's chunk on ``ahead``'s thread, for the state ``a`` or its
+        shapes (known from the start: the joint state is built with the trainer)."""
         if self.joint_program is None and ahead.on:
+            make = lambda a: self.joint_args([], side_cost, gammas, sizes, a)  # noqa: E731
             self.joint_program = ahead.submit("joint_chunk", self._compile_joint,
-                                              self.joint_args([], side_cost, gammas, sizes))
+                                              arguments(make, a))
 
     def _compile_joint(self, args: tuple):
         return self.engine.compile("joint_chunk", self.engine.joint_chunk, args, donate=(0,))

@@ -11,6 +11,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.agents.option_batch import joint_batch, options_update
 from smjax.agents.smdp import carry_pending
@@ -73,9 +74,10 @@ class Engine:
         self.runner_settings = dict(reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
                                     policy_memory=cfg.policy_memory)
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, **self.runner_settings)
-        # what the policies see (one compiled program: run op by op, an environment's reset
-        # compiles dozens of tiny programs before training starts)
-        self.example_obs = jax.jit(self._example_obs)(jax.random.PRNGKey(0), env_params)
+        # what the policies see: its shape and dtype are all a learner's init reads, so it is
+        # zeros of the observation's shape (traced, nothing compiles or runs)
+        obs = jax.eval_shape(self._example_obs, jax.random.PRNGKey(0), env_params)
+        self.example_obs = np.zeros(obs.shape, obs.dtype)
         self.num_actions = hierarchy.num_actions
         # every argument has a seed axis: each seed trains its own level (or fine-tunes)
         self.chunk = jax.jit(jax.vmap(self.seed_chunk), donate_argnums=(0,))

@@ -52,8 +52,14 @@ def store_learned(mask: jax.Array, learned: jax.Array, params, bank):
 def finetune_hp(cfg: TrainConfig, hp: dict) -> dict:
     """``cfg.fine_tuning.agent`` as the learner's per-slot hyper-parameter leaves (``hp``: a
     fresh learner's)."""
+    check_finetune_agent(cfg, hp)
+    return {k: jnp.full_like(hp[k], v) for k, v in cfg.fine_tuning.agent.items()}
+
+
+def check_finetune_agent(cfg: TrainConfig, hp) -> None:
+    """``cfg.fine_tuning.agent`` names only hyper-parameters the learner reads per turn
+    (``hp``: a fresh learner's, or their names)."""
     unknown = sorted(set(cfg.fine_tuning.agent) - set(hp))
     if unknown:
         raise ConfigError(f"config field 'finetune_agent' names {unknown}, which the "
                           f"{cfg.algo} learner does not read per turn; it reads {sorted(hp)}")
-    return {k: jnp.full_like(hp[k], v) for k, v in cfg.fine_tuning.agent.items()}

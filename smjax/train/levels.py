@@ -11,6 +11,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from smjax.train import distributed as dist
+from smjax.train.ahead import arguments
 from smjax.train.config import LevelSettings, TrainConfig
 from smjax.train.plans import LevelPlan
 from smjax.train.seed_arrays import fold_in, freeze
@@ -143,20 +144,24 @@ class LevelStage:
                 passed.append(s)
         return passed, scalars
 
-    def gate_args(self, st: TrainerState, controls: list[SeedControls], due: list[int]):
-        """``Engine.gate``'s arguments for a gate attempt of the ``due`` seeds."""
-        a = self.slots.arrays
+    def gate_args(self, st: TrainerState, controls: list[SeedControls], due: list[int],
+                  a=None):
+        """``Engine.gate``'s arguments for a gate attempt of the ``due`` seeds (on the state
+        ``a``; default the slots')."""
+        a = self.slots.arrays if a is None else a
         # the attempt number varies the gate's episodes between attempts, deterministically
         keys = fold_in(a.keys, jnp.asarray(st.chunks, jnp.uint32))
         return (keys, a.state, a.bank, a.learned, [c.option for c in controls],
                 [c.start for c in controls], [s in due for s in range(len(self.slots))],
                 [c.threshold for c in controls])
 
-    def gate_ahead(self, st: TrainerState, controls: list[SeedControls], ahead) -> None:
-        """Compile the gate's program on ``ahead``'s thread (with the gate on)."""
+    def gate_ahead(self, st: TrainerState, controls: list[SeedControls], ahead, a) -> None:
+        """Compile the gate's program on ``ahead``'s thread (with the gate on), for the state
+        ``a`` (or its shapes: ``smjax.train.ahead.arguments``)."""
         if self.cfg.evaluation.gate:
-            args = self.engine.gate_args(*self.gate_args(st, controls, []), place=self.slots.small)
-            self.engine.episodes_ahead(args, self.cfg.evaluation.gate_envs, ahead)
+            make = lambda a: self.engine.gate_args(  # noqa: E731
+                *self.gate_args(st, controls, [], a), place=self.slots.small)
+            self.engine.episodes_ahead(arguments(make, a), self.cfg.evaluation.gate_envs, ahead)
 
     def finish(self, st: TrainerState, ends: Ends, options: list[int]) -> None:
         """Freeze the learners of the seeds whose level ended into their banks and record

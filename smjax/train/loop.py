@@ -27,12 +27,12 @@ import jax.numpy as jnp
 
 from smjax.core.timeline import TIMELINE
 from smjax.train import distributed as dist
-from smjax.train.ahead import CompileAhead
+from smjax.train.ahead import CompileAhead, arguments, placed
 from smjax.train.chunks import ChunkRunner
 from smjax.options.episodes import EVAL_TEMPERATURES
 from smjax.train.engine import Engine, SeedState
 from smjax.train.finetune import FinetuneStage
-from smjax.train.finetune_ops import finetune_hp
+from smjax.train.finetune_ops import check_finetune_agent, finetune_hp
 from smjax.train.hooks import CheckpointHook, ChunkReport, Hook, TensorBoardHook
 from smjax.train.levels import LevelStage
 from smjax.train.plans import LevelPlan
@@ -64,12 +64,14 @@ class HierarchyTrainer:
     def __init__(self, engine: Engine, plans: list[LevelPlan], seeds: list[int], *,
                  out_dir=None, progress: bool = True, run_meta: dict | None = None,
                  hp: dict | None = None, configs: list | None = None,
-                 hooks: list[Hook] | None = None):
+                 hooks: list[Hook] | None = None, ahead: CompileAhead | None = None):
         """``seeds``: one per slot (a sweep repeats them, once per point); ``hp``: per slot,
         the learner's sweepable hyper-parameters that differ from its config; ``configs``:
         per slot, the config its run alone has (a sweep point's; default the engine's).
-        ``hooks``: the side jobs
-        (default: ``default_hooks``)."""
+        ``hooks``: the side jobs (default: ``default_hooks``). ``ahead``: where the run's
+        programs compile ahead (``smjax.train.ahead``; with ``from_start``, the level chunk
+        from here on, while the trainer builds its state; None: one made by the first
+        chunk)."""
         cfg = self.cfg = engine.cfg
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
         S = len(self.seeds)
@@ -80,30 +82,44 @@ class HierarchyTrainer:
         # after the levels, a seed fine-tunes (one stage more) unless it is off
         self.finetune = FinetuneStage(engine, cfg, plans, self.slots) if cfg.fine_tuning.on else None
         self.stages: list[Stage] = [self.levels] + ([self.finetune] if self.finetune else [])
-        keys = self.slots.committed(
-            jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32)))
-        keys, k_init, k_reset = split_seeds(keys, 3)
-        learner = self.slots.init_learner(engine, k_init)
-        tuning_hp = finetune_hp(cfg, learner.hp)  # refused even where fine-tuning is off
-        if self.finetune is not None:
-            self.finetune.hp = tuning_hp
-        joint = self.finetune is not None and self.finetune.joint
-        bank = engine.new_bank(learner)
-        self.slots.set(TrainArrays(
-            bank=bank, keys=keys, learned=jnp.zeros((S, engine.h.num_options), bool),
-            state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
-            **SuccessWindow.pair(S, cfg.window_slots),
-            levels_bank=bank if self.finetune else None,  # arrays are immutable: no copy
-            joint=(engine.joint_state(learner, bank, k_reset, keys) if joint else None)))
         self.num_stages = len(plans) + (self.finetune is not None)
         self.state = TrainerState.new(plans, S)
         self.runner = ChunkRunner(engine, self.slots, metrics=cfg.tensorboard)
-        self.ahead: CompileAhead | None = None  # made by the first chunk
+        self.ahead, self.ahead_rest = ahead, False  # the rest: gate, joint chunk, evaluation
+        keys = self.slots.committed(
+            jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32)))
+        # the state's shapes (nothing runs): a bad fine-tuning setting is refused (even where
+        # fine-tuning is off) before anything compiles, and the level chunk compiles ahead
+        shapes = jax.eval_shape(self.initial_arrays, keys)
+        check_finetune_agent(cfg, shapes.state.learner.hp)
+        if ahead is not None and ahead.on and ahead.from_start and self.slots.mesh is None:
+            shapes = placed(shapes, keys.sharding)
+            self.runner.level_ahead(ahead, self.controls(), shapes)
+            self.compile_ahead(self.controls(), shapes)
+        self.slots.set(self.initial_arrays(keys))
+        tuning_hp = finetune_hp(cfg, self.arrays.state.learner.hp)
+        if self.finetune is not None:
+            self.finetune.hp = tuning_hp
         self.hooks = (default_hooks(cfg, out_dir, progress, run_meta) if hooks is None
                       else list(hooks))
         # the results calls the hooks get after ``end``: ``smjax.train.run`` sets it (one a
         # run, one a sweep point); none where the trainer is run on its own
         self.results_due = 0
+
+    def initial_arrays(self, keys: jax.Array) -> TrainArrays:
+        """Every slot's device state before its first stage starts, from its key [S]: a
+        function of the keys alone, so its shapes are known before it runs."""
+        engine, S = self.engine, len(self.seeds)
+        keys, k_init, k_reset = split_seeds(keys, 3)
+        learner = self.slots.init_learner(engine, k_init)
+        joint = self.finetune is not None and self.finetune.joint
+        bank = engine.new_bank(learner)
+        return TrainArrays(
+            bank=bank, keys=keys, learned=jnp.zeros((S, engine.h.num_options), bool),
+            state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
+            **SuccessWindow.pair(S, self.cfg.window_slots),
+            levels_bank=bank if self.finetune else None,  # arrays are immutable: no copy
+            joint=(engine.joint_state(learner, bank, k_reset, keys) if joint else None))
 
     @property
     def arrays(self) -> TrainArrays:
@@ -196,27 +212,33 @@ class HierarchyTrainer:
             f"seed {self.seeds[s]} level {c.level} ({c.name})"
             for s, c in ((s, self.stage_of(s).plan(st, s)) for s in training))
         on_cpu = jax.default_backend() == "cpu"
-        if self.ahead is None and not on_cpu:  # beside the level chunk's compile
-            self.compile_ahead(controls, threads=2)
+        if not on_cpu:  # beside the level chunk's compile
+            self.compile_ahead(controls)
         out, compile_s = self.runner.run(
             controls, [s in training for s in range(len(self.seeds))], joint, st.chunks, where)
         st.compile_seconds += compile_s
-        if self.ahead is None:  # a CPU: after it
-            self.compile_ahead(controls, threads=1)
+        self.compile_ahead(controls)  # a CPU: after it
         return out
 
-    def compile_ahead(self, controls: list[SeedControls], threads: int) -> None:
-        """The gate's, joint fine-tuning's and the evaluation's programs, compiled on
-        ``threads`` threads while the chunks run (``smjax.train.ahead`` says when)."""
-        st, ahead, a = self.state, CompileAhead(threads), self.arrays
-        self.ahead = ahead
+    def compile_ahead(self, controls: list[SeedControls], shapes: TrainArrays | None = None
+                      ) -> None:
+        """The gate's, joint fine-tuning's and the evaluation's programs, compiled on the
+        ahead's threads while the chunks run (``smjax.train.ahead`` says when), once;
+        ``shapes``: the state's, where it is not built yet."""
+        if self.ahead_rest:
+            return
+        if self.ahead is None:
+            self.ahead = CompileAhead.for_backend()
+        st, ahead, self.ahead_rest = self.state, self.ahead, True
+        a = self.arrays if shapes is None else shapes
         if any(self.levels.holds(st, s) for s in self.training()):
-            self.levels.gate_ahead(st, controls, ahead)
+            self.levels.gate_ahead(st, controls, ahead, a)
         if self.finetune is not None and self.finetune.joint:
-            self.runner.joint_ahead(ahead, *self.finetune.joint_controls())
-        self.engine.episodes_ahead(self.engine.evaluate_args(
-            a.keys, a.bank, a.learned, place=self.slots.small), self.cfg.evaluation.eval_envs,
-            ahead)
+            self.runner.joint_ahead(ahead, *self.finetune.joint_controls(), a)
+        evaluation = lambda a: self.engine.evaluate_args(  # noqa: E731
+            a.keys, a.bank, a.learned, place=self.slots.small)
+        self.engine.episodes_ahead(arguments(evaluation, a), self.cfg.evaluation.eval_envs,
+                                   ahead)
 
     def decide(self, training: list[int], controls: list[SeedControls], ends: Ends) -> list:
         """Every stage's decisions on the chunk, into ``ends``; the gates' scalars."""

@@ -22,6 +22,7 @@ from smjax.train.program_cache import cacheable_identity
 from smjax.policy.artifact import policy_meta
 from smjax.policy.hierarchies import declared_identity
 from smjax.train.plans import resolve_run
+from smjax.train.ahead import CompileAhead
 from smjax.train.memory import check_fits
 from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.restorable import check_restorable
@@ -182,7 +183,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
             hooks.append(ResultsHook(
                 _policy_meta(task, engine, resolved.hierarchy_name, given, env_overrides)))
         trainer = HierarchyTrainer(engine, list(resolved.plans), slot_seeds, hp=hp,
-                                   configs=configs, hooks=hooks + list(outputs.hooks))
+                                   configs=configs, hooks=hooks + list(outputs.hooks),
+                                   ahead=CompileAhead.for_backend())
         trainer.results_due = len(points) if points is not None else 1
     if not engine.root_has_threshold and dist.is_writer():
         root = resolved.hierarchy.task

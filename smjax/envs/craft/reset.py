@@ -7,9 +7,9 @@ uniform in 1..10, every empty cell of its 3 x 3 neighbourhood becomes water (gol
 then the agent at a free cell facing DOWN.
 
 Sequential uniform placement onto distinct free cells is the same distribution as the first
-20 entries of a uniform random permutation of the free cells, so we run 20 steps of a
+20 entries of a uniform random permutation of the free cells, so we take 21 draws of a
 Fisher-Yates shuffle over a *virtual* list of the free cells (closed form, no 100-element
-array): swaps are remembered as (position, value) pairs and looked up by comparison.
+array): ``partial_shuffle``.
 
 Why not ``jax.random``: the auto-resetting ``step`` builds a fresh world on every step (under
 ``vmap`` both sides of the reset select run), so generation sits on the hot path. Its 21
@@ -97,6 +97,35 @@ def _free_cell(k: jax.Array, col_lo: jax.Array, width: jax.Array) -> tuple[jax.A
     return x, y
 
 
+def partial_shuffle(u: jax.Array, n: jax.Array) -> jax.Array:
+    """The first ``T = len(u)`` entries of a Fisher-Yates shuffle of ``[0, n)``: draw ``t``
+    takes position ``j_t = t + floor(u_t (n - t))`` and moves the value at ``t`` there.
+
+    The positions are known from ``u`` alone, so the swaps are found at once rather than
+    one after another (a sequence of ``T`` draws, each looking up the ``t`` swaps before
+    it, is ~T^2 operations unrolled into every program that resets, and compiles slowly):
+    the value at position ``p`` before draw ``t`` is the value moved by the last draw
+    ``t' < t`` with ``j_t' = p`` (else ``p``), and the value draw ``t'`` moved is, by the
+    same rule, the one at position ``t'`` before it: following those links back from
+    ``t'`` ends at the position the value started at (pointer doubling, log2 T steps)."""
+    T = u.shape[0]
+    t = jnp.arange(T, dtype=jnp.int32)
+    j = t + _uniform_int(u, n - t)
+
+    def last_draw_at(p: jax.Array) -> jax.Array:
+        """Per draw t: the last draw before t that took position p[t], or -1."""
+        hits = (j[None, :] == p[:, None]) & (t[None, :] < t[:, None])
+        return jnp.max(jnp.where(hits, t[None, :], -1), axis=1)
+
+    # moved[t]: the value draw t moved from position t (where it started: a root)
+    link = last_draw_at(t)
+    moved = jnp.where(link < 0, t, link)
+    for _ in range(max(T - 1, 1).bit_length()):
+        moved = moved[moved]
+    at = last_draw_at(j)
+    return jnp.where(at < 0, j, moved[jnp.maximum(at, 0)])
+
+
 def generate(key: jax.Array, world: str) -> tuple[jax.Array, jax.Array]:
     """A fresh map: (grid uint8 [12, 12], agent pos int32 [2]). ``world`` is static."""
     if world not in ("plain", "island", "cave"):
@@ -120,24 +149,7 @@ def generate(key: jax.Array, world: str) -> tuple[jax.Array, jax.Array]:
         kinds = jnp.where(interior, kinds, C.BOUNDARY).astype(jnp.uint8)
         flat = flat.at[cx * N + cy].set(kinds)
     num_free = 100 - 2 * width
-    # Partial Fisher-Yates over the virtual list [0, num_free): draw t takes position
-    # j_t >= t; the value previously at position t moves to j_t.
-    moved_pos: list[jax.Array] = []
-    moved_val: list[jax.Array] = []
-
-    def value_at(p: jax.Array) -> jax.Array:
-        v = p
-        for mp, mv in zip(moved_pos, moved_val):
-            v = jnp.where(mp == p, mv, v)
-        return v
-
-    chosen = []
-    for t in range(NUM_DRAWS):
-        j = t + _uniform_int(u[t], num_free - t)
-        chosen.append(value_at(j))
-        moved_val.append(value_at(jnp.int32(t)))
-        moved_pos.append(j)
-    xs, ys = _free_cell(jnp.stack(chosen), col_lo, width)
+    xs, ys = _free_cell(partial_shuffle(u[:NUM_DRAWS], num_free), col_lo, width)
     cells = xs[:-1] * N + ys[:-1]
     flat = flat.at[cells].set(jnp.asarray(PLACED_KINDS), unique_indices=True)
     pos = jnp.stack([xs[-1], ys[-1]]).astype(jnp.int32)
