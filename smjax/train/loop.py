@@ -88,15 +88,16 @@ class HierarchyTrainer:
         self.ahead, self.ahead_rest = ahead, False  # the rest: gate, joint chunk, evaluation
         keys = self.slots.committed(
             jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32)))
-        # the state's shapes (nothing runs): a bad fine-tuning setting is refused (even where
-        # fine-tuning is off) before anything compiles, and the level chunk compiles ahead
-        shapes = jax.eval_shape(self.initial_arrays, keys)
-        check_finetune_agent(cfg, shapes.state.learner.hp)
         if ahead is not None and ahead.on and ahead.from_start and self.slots.mesh is None:
+            # the programs compile from the state's shapes (traced: nothing runs), after a
+            # bad fine-tuning setting is refused
+            shapes = jax.eval_shape(self.initial_arrays, keys)
+            check_finetune_agent(cfg, shapes.state.learner.hp)
             shapes = placed(shapes, keys.sharding)
             self.runner.level_ahead(ahead, self.controls(), shapes)
             self.compile_ahead(self.controls(), shapes)
         self.slots.set(self.initial_arrays(keys))
+        # refused even where fine-tuning is off
         tuning_hp = finetune_hp(cfg, self.arrays.state.learner.hp)
         if self.finetune is not None:
             self.finetune.hp = tuning_hp
