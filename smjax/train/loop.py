@@ -34,7 +34,7 @@ from smjax.train.engine import Engine, SeedState
 from smjax.train.finetune import FinetuneStage
 from smjax.train.finetune_ops import check_finetune_agent, finetune_hp
 from smjax.train.hooks import CheckpointHook, ChunkReport, Hook, TensorBoardHook
-from smjax.train.levels import LevelStage
+from smjax.train.levels import LevelStage, freeze_learners
 from smjax.train.plans import LevelPlan
 from smjax.train.progress import ProgressBar
 from smjax.train.seed_arrays import (  # noqa: F401 - NonFiniteError re-exported
@@ -231,6 +231,8 @@ class HierarchyTrainer:
         if self.ahead is None:
             self.ahead = CompileAhead.for_backend()
         st, ahead, self.ahead_rest = self.state, self.ahead, True
+        if ahead.on and shapes is None and not ahead.from_start:
+            self.rehearse_changes()
         a = self.arrays if shapes is None else shapes
         if any(self.levels.holds(st, s) for s in self.training()):
             self.levels.gate_ahead(st, controls, ahead, a)
@@ -241,15 +243,23 @@ class HierarchyTrainer:
         self.engine.episodes_ahead(arguments(evaluation, a), self.cfg.evaluation.eval_envs,
                                    ahead)
 
+    def rehearse_changes(self) -> None:
+        """A level change and a stage start that change no seed (every mask off), so that
+        their small programs compile now: on a CPU a program compiled while a compile ahead
+        runs waits for it (seconds, for what takes a tenth of one alone)."""
+        freeze_learners(self.slots, [], [c.option for c in self.controls()])
+        self.start([], rehearse=True)
+
     def decide(self, training: list[int], controls: list[SeedControls], ends: Ends) -> list:
         """Every stage's decisions on the chunk, into ``ends``; the gates' scalars."""
         return [x for stage in self.stages
                 for x in stage.decide(self.state, self.held(stage, training), controls, ends)]
 
-    def start(self, seeds: list[int]) -> None:
+    def start(self, seeds: list[int], rehearse: bool = False) -> None:
         """Fresh learners, keys and environments for these seeds' next level or fine-tuning
-        turn (each seed's keys split exactly as if it trained alone)."""
-        if not seeds:
+        turn (each seed's keys split exactly as if it trained alone). ``rehearse``: with no
+        seeds, run every step anyway (fine-tuning's start included), changing nothing."""
+        if not seeds and not rehearse:
             return
         slots = self.slots
         # computed for every seed and selected, so that every call has the same shapes
@@ -261,7 +271,7 @@ class HierarchyTrainer:
         fresh = SeedState(self.engine.reset(k_reset, starts),
                           slots.init_learner(self.engine, k_init), k_run)
         tuning = self.held(self.finetune, seeds) if self.finetune is not None else []
-        if tuning:
+        if tuning or (rehearse and self.finetune is not None):
             fresh, a = self.finetune.start(self.state, tuning, fresh, a, k_reset,
                                            [c.option for c in controls])
         empty = SuccessWindow.empty(len(slots), self.cfg.window_slots)  # a new level's
