@@ -118,3 +118,27 @@ def test_ctrl_c_while_waiting_for_a_compile_ahead_ends_the_run():
     args = (jnp.zeros((2,)),)
     with pytest.raises(KeyboardInterrupt):
         resolve(Pending(interrupted, signature(args)), args, lambda xs: pytest.fail("compiled"))
+
+
+@pytest.mark.parametrize("mode", ["joint", "turns"])
+def test_a_rehearsed_level_change_and_stage_start_change_no_seed(mode):
+    # on a CPU, the programs of a level change and of fine-tuning's start compile before the
+    # compiles ahead begin, by running them with every seed's mask off
+    from smjax.agents import make_agent
+    from smjax.train.engine import Engine
+    from smjax.train.loop import HierarchyTrainer
+    from smjax.train.plans import plan_levels
+
+    env, params = make_keydoor()
+    h = env.hierarchies()["paper"]
+    cfg = TrainConfig(**(SMALL | {"finetune_mode": mode}))
+    trainer = HierarchyTrainer(Engine(env, params, h, make_agent("ppo"), cfg),
+                               plan_levels(h, "top-down"), [0, 1], hooks=[])
+    before = jax.tree.map(np.asarray, trainer.arrays)
+    host = trainer.state.to_json()
+    trainer.rehearse_changes()
+    after = jax.tree.map(np.asarray, trainer.arrays)
+    assert jax.tree.structure(before) == jax.tree.structure(after)
+    for b, a in zip(jax.tree.leaves(before), jax.tree.leaves(after)):
+        np.testing.assert_array_equal(a, b)
+    assert trainer.state.to_json() == host

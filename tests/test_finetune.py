@@ -207,10 +207,10 @@ def test_a_new_turn_goes_on_with_the_episodes_in_flight(monkeypatch, go_on):
     from smjax.train.loop import HierarchyTrainer
     start, seen = HierarchyTrainer.start, []
 
-    def spy(self, seeds):
+    def spy(self, seeds, **rehearse):
         later = [s for s in seeds if self.finetuning(s) and self.state.finetune[s].turns]
         before = jax.tree.map(np.asarray, self.arrays.state.carry)
-        start(self, seeds)
+        start(self, seeds, **rehearse)
         if later:
             seen.append((later, before, jax.tree.map(np.asarray, self.arrays.state.carry)))
 
