@@ -173,25 +173,32 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
     # the checkpoint's files and host state, checked before the trainer compiles anything
     checked = (check_restorable(out_dir, resume_from, len(slot_seeds), resolved.num_stages)
                if resume else None)
-    with TIMELINE.span("memory check, engine and trainer"):
-        check_fits(env, env_params, cfg, len(slot_seeds))
-        engine = Engine(env, env_params, resolved.hierarchy, agent, cfg)
-        engine.program_identity = cacheable_identity(
-            task, given, identity | {"task_name": task, "config": cfg.to_dict()})
-        hooks = default_hooks(cfg, out_dir, outputs.progress, identity)
-        if out_dir is not None:  # the run's files, before the caller's hooks read them
-            hooks.append(ResultsHook(
-                _policy_meta(task, engine, resolved.hierarchy_name, given, env_overrides)))
-        trainer = HierarchyTrainer(engine, list(resolved.plans), slot_seeds, hp=hp,
-                                   configs=configs, hooks=hooks + list(outputs.hooks),
-                                   ahead=CompileAhead.for_backend())
-        trainer.results_due = len(points) if points is not None else 1
-    if not engine.root_has_threshold and dist.is_writer():
-        root = resolved.hierarchy.task
-        warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(root).threshold), stacklevel=3)
-    if resume:
-        with TIMELINE.span("checkpoint restore"):
-            trainer.restore(resume_from, checked)
+    # programs may compile ahead from the trainer's construction on; closed by the run, or
+    # here where it never starts (nothing left queued to compile)
+    ahead = CompileAhead.for_backend()
+    try:
+        with TIMELINE.span("memory check, engine and trainer"):
+            check_fits(env, env_params, cfg, len(slot_seeds))
+            engine = Engine(env, env_params, resolved.hierarchy, agent, cfg)
+            engine.program_identity = cacheable_identity(
+                task, given, identity | {"task_name": task, "config": cfg.to_dict()})
+            hooks = default_hooks(cfg, out_dir, outputs.progress, identity)
+            if out_dir is not None:  # the run's files, before the caller's hooks read them
+                hooks.append(ResultsHook(
+                    _policy_meta(task, engine, resolved.hierarchy_name, given, env_overrides)))
+            trainer = HierarchyTrainer(engine, list(resolved.plans), slot_seeds, hp=hp,
+                                       configs=configs, hooks=hooks + list(outputs.hooks),
+                                       ahead=ahead)
+            trainer.results_due = len(points) if points is not None else 1
+        if not engine.root_has_threshold and dist.is_writer():
+            root = resolved.hierarchy.task
+            warnings.warn(_UNBOUNDED.format(env.name, cfg.for_level(root).threshold), stacklevel=3)
+        if resume:
+            with TIMELINE.span("checkpoint restore"):
+                trainer.restore(resume_from, checked)
+    except BaseException:
+        ahead.close()
+        raise
     raw = _train(trainer, env, env_params, out_dir)
     raw["eval_keys"] = final_evaluation_keys(trainer.arrays.keys)
     extra = {"hierarchy_used": resolved.hierarchy_name, "env_overrides": env_overrides,
