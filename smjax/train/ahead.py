@@ -5,13 +5,13 @@ does before its first chunk (the engine's and the trainer's small programs: rese
 inits, copies); the gate's episodes program, joint fine-tuning's chunk and the final
 evaluation's program are needed seconds or minutes later, and compiling each where it is
 first needed stops training for as long. ``CompileAhead`` compiles them on background
-threads instead (``for_backend``). With a GPU (or another accelerator) the level chunk
-starts as soon as the trainer knows its arguments' shapes (before it builds them), beside
-the small programs on the main thread, and the other three follow when those are done,
-on three threads in all: the host's cores are otherwise idle while the device trains. On
-a CPU the other three start after the first level chunk, one at a time, and the level
-chunk compiles where it is first run: XLA's compile already keeps a CPU's cores busy, so
-compiles there only gain what the training chunks leave idle. They are the very programs the run would
+threads instead (``for_backend``). With a GPU (or another accelerator) all four are
+submitted as soon as the trainer knows its state's shapes (before it builds them), the
+level chunk first, and compile three at a time beside the small programs on the main
+thread: the host's cores are otherwise idle while the device trains. On a CPU the level
+chunk compiles where it is first run and the other three start after the first level
+chunk, one at a time: XLA's compile already keeps a CPU's cores busy, so compiles there
+only gain what the training chunks leave idle. They are the very programs the run would
 compile when first needed (same function, shapes, dtypes and layout), so results do not
 change; where one is needed before its compile has finished, the run waits for it, and
 that wait is its compile time.

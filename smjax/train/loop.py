@@ -94,8 +94,9 @@ class HierarchyTrainer:
             shapes = jax.eval_shape(self.initial_arrays, keys)
             check_finetune_agent(cfg, shapes.state.learner.hp)
             shapes = placed(shapes, keys.sharding)
-            self.runner.level_ahead(ahead, self.controls(), shapes)
-            self.compile_ahead(self.controls(), shapes)
+            controls = self.controls()
+            self.runner.level_ahead(ahead, controls, shapes)
+            self.compile_ahead(controls, shapes)
         self.slots.set(self.initial_arrays(keys))
         # refused even where fine-tuning is off
         tuning_hp = finetune_hp(cfg, self.arrays.state.learner.hp)
