@@ -24,6 +24,7 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.core.timeline import TIMELINE
 from smjax.train import distributed as dist
@@ -268,14 +269,14 @@ class HierarchyTrainer:
         a = slots.local()
         keys, k_init, k_reset, k_run = split_seeds(a.keys, 4)
         controls = self.controls()
-        starts = jnp.asarray([c.start for c in controls], jnp.int32)
+        starts = np.asarray([c.start for c in controls], np.int32)
         fresh = SeedState(self.engine.reset(k_reset, starts),
                           slots.init_learner(self.engine, k_init), k_run)
         tuning = self.held(self.finetune, seeds) if self.finetune is not None else []
         if tuning or (rehearse and self.finetune is not None):
             fresh, a = self.finetune.start(self.state, tuning, fresh, a, k_reset,
                                            [c.option for c in controls])
-        empty = SuccessWindow.empty(len(slots), self.cfg.window_slots)  # a new level's
+        empty = SuccessWindow.empty(len(slots), self.cfg.window_slots, np)  # a new level's
         keys, state, window = select_seeds(slots.mask(seeds), (keys, fresh, empty),
                                            (a.keys, a.state, a.window))
         slots.set(a.replace(keys=keys, state=state, window=window))

@@ -6,16 +6,19 @@ others': these compute for every seed and select, so that every call has the sam
 """
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 
 from smjax.train import distributed as dist
 
 
-def split_seeds(keys: jax.Array, n: int) -> list[jax.Array]:
+@functools.partial(jax.jit, static_argnums=1)
+def split_seeds(keys: jax.Array, n: int) -> tuple[jax.Array, ...]:
     """Each seed's key split in ``n``: n arrays of keys [S]."""
     split = jax.vmap(lambda k: jax.random.split(k, n))(keys)
-    return [split[:, i] for i in range(n)]
+    return tuple(split[:, i] for i in range(n))
 
 
 @jax.jit

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from smjax.train import distributed as dist
 from smjax.train.seed_arrays import local
@@ -61,11 +62,16 @@ class Slots:
         changes work on local copies (``local``) and ``set`` places the result: unchanged."""
         if self.mesh is not None:
             return tree
-        return jax.device_put(tree, jax.devices()[0])
+        # most leaves come out of a program on committed inputs, committed already (and
+        # a device_put costs a dispatch per leaf)
+        device = jax.devices()[0]
+        return jax.tree.map(
+            lambda x: x if isinstance(x, jax.Array) and x.committed and x.devices() == {device}
+            else jax.device_put(x, device), tree)
 
     def local(self) -> TrainArrays:
         """The device state as arrays this process holds whole (for host-side changes)."""
-        return jax.tree.map(local, self.arrays)
+        return self.arrays if self.mesh is None else jax.tree.map(local, self.arrays)
 
     def small(self, tree):
         """Small per-call inputs (flags, masks) on the mesh: with several processes every
@@ -77,5 +83,5 @@ class Slots:
     def per_seed(self, values, dtype) -> jax.Array:
         return self.small(jnp.asarray(values, dtype))
 
-    def mask(self, seeds: list[int]) -> jax.Array:
-        return jnp.asarray([s in seeds for s in range(len(self.seeds))])
+    def mask(self, seeds: list[int]) -> np.ndarray:
+        return np.asarray([s in seeds for s in range(len(self.seeds))])

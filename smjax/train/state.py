@@ -38,10 +38,11 @@ class SuccessWindow:
     next: jax.Array   # [...] int32: the slot the next batch goes to
 
     @classmethod
-    def empty(cls, num_seeds: int, slots: int) -> "SuccessWindow":
-        return cls(total=jnp.zeros((num_seeds, slots), jnp.float32),
-                   count=jnp.zeros((num_seeds, slots), jnp.int32),
-                   next=jnp.zeros((num_seeds,), jnp.int32))
+    def empty(cls, num_seeds: int, slots: int, xp=jnp) -> "SuccessWindow":
+        """No batches yet (``xp``: ``numpy`` for host arrays that a program takes in)."""
+        return cls(total=xp.zeros((num_seeds, slots), xp.float32),
+                   count=xp.zeros((num_seeds, slots), xp.int32),
+                   next=xp.zeros((num_seeds,), xp.int32))
 
     @classmethod
     def pair(cls, num_seeds: int, slots: int) -> dict:
