@@ -242,9 +242,9 @@ def cmd_train(args) -> int:
 def batch_description(cfg, slots: int) -> str:
     """The settings that size a run's memory, as an out-of-memory message names them: the
     batch, and the pool, window and layer sizes where they were set."""
-    parts = [f"{slots} seed(s) x num_envs {cfg.num_envs}"]
-    if cfg.reset_pool is not None:
-        parts.append(f"reset_pool {cfg.reset_pool}")
+    parts = [f"{slots} seed(s) x num_envs {cfg.run.num_envs}"]
+    if cfg.run.reset_pool is not None:
+        parts.append(f"reset_pool {cfg.run.reset_pool}")
     if cfg.window_slots != type(cfg)().success_window:
         parts.append(f"success_window {cfg.window_slots}")
     if "hidden_sizes" in cfg.agent:

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from smjax.train.config import ConfigError, TrainConfig, resolve_config
-from smjax.train.sections import SECTIONS, Evaluation, FineTuning
+from smjax.train.sections import SECTIONS, Evaluation, FineTuning, Run
 
 FLAT_VALUES = {"finetune_threshold": 0.7, "finetune_mode": "turns", "finetune_max_episodes": 900,
                "finetune_plateau_episodes": 0, "finetune_agent": {"learning_rate": 1e-4},
@@ -20,6 +20,7 @@ def test_every_section_field_names_a_config_field_once():
     flat = [name for section in SECTIONS.values() for name in section.values()]
     assert set(flat) <= fields and len(set(flat)) == len(flat)
     assert set(SECTIONS["evaluation"]) == {f.name for f in dataclasses.fields(Evaluation)}
+    assert set(SECTIONS["run"]) == {f.name for f in dataclasses.fields(Run)}
 
 
 def test_the_sections_hold_the_config_values():
@@ -32,6 +33,18 @@ def test_the_sections_hold_the_config_values():
     assert (ev.gate, ev.gate_envs, ev.eval_max_ticks) == (False, 32, 300)
     assert TrainConfig().fine_tuning.on and not TrainConfig(method="bottom-up").fine_tuning.on
     assert cfg.replace(finetune_threshold=0.5).fine_tuning.threshold == 0.5
+
+
+def test_the_run_section_resolves_the_rollout_shape():
+    run = TrainConfig(num_envs=16, rollout_ticks=8, updates_per_chunk=3, tensorboard=True).run
+    assert isinstance(run, Run) and run.tensorboard
+    assert (run.pool_size, run.steps_per_update, run.steps_per_chunk) == (16, 128, 384)
+    assert TrainConfig(num_envs=16, reset_pool=0).run.pool_size == 0
+    assert TrainConfig(num_envs=16, reset_pool=4).run.pool_size == 4
+    assert (resolve_config(sets={"run.num_envs": "16", "run.checkpoint_every": "5"})
+            == TrainConfig(num_envs=16, checkpoint_every=5.0))
+    with pytest.raises(ConfigError, match="given twice"):
+        TrainConfig.from_dict({"run": {"num_envs": 8}, "num_envs": 16})
 
 
 def test_a_file_may_name_fields_by_section(tmp_path):

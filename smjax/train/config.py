@@ -13,7 +13,7 @@ from smjax.train.config_checks import (  # noqa: F401 - re-exported: the config'
     ALGOS, FINETUNE_CHOICES, FINETUNE_MODES, FROZEN_POLICIES, LEVEL_FIELDS, METHODS, ConfigError,
     check_fields, field_values, level_configs, normalize_agent, parsed_fields,
 )
-from smjax.train.sections import Evaluation, FineTuning, SectionError, flatten_sections
+from smjax.train.sections import Evaluation, FineTuning, Run, SectionError, flatten_sections
 
 
 @dataclass(frozen=True)
@@ -38,9 +38,10 @@ class TrainConfig:
     """Every knob of a training run (docs/guide.md, "TrainConfig reference").
 
     The parts of training read it in typed sections, resolved once when it is made:
+    ``run`` (the rollout's shape, the runner's structure, checkpoints and TensorBoard),
     ``fine_tuning`` (``finetune*`` fields), ``evaluation`` (``gate*``, ``eval_*``) and
     ``for_level(name)``; files and ``--set`` may name fields by section
-    (``fine_tuning.threshold``: :mod:`smjax.train.sections`).
+    (``fine_tuning.threshold``, ``run.num_envs``: :mod:`smjax.train.sections`).
 
     Attributes:
       method: top-down (the paper's Algorithms 1-2), bottom-up (sub-skills first, from
@@ -167,7 +168,8 @@ class TrainConfig:
         object.__setattr__(self, "_level_settings", (LevelSettings.of(self), levels))
         # the learner's overrides as JSON stores them, so a resumed run compares equal
         object.__setattr__(self, "agent", normalize_agent(self.algo, self.agent))
-        object.__setattr__(self, "_sections", (FineTuning.of(self), Evaluation.of(self)))
+        object.__setattr__(self, "_sections",
+                           (FineTuning.of(self), Evaluation.of(self), Run.of(self)))
 
     @property
     def fine_tuning(self) -> FineTuning:
@@ -180,9 +182,9 @@ class TrainConfig:
         return self._sections[1]
 
     @property
-    def pool_size(self) -> int:
-        """Episode starts per rollout (``reset_pool`` resolved; 0: none, reset every tick)."""
-        return self.num_envs if self.reset_pool is None else self.reset_pool
+    def run(self) -> Run:
+        """How the ticks run and what the run writes beside its results."""
+        return self._sections[2]
 
     @property
     def window_slots(self) -> int:

@@ -71,8 +71,9 @@ class Engine:
         self.temperature = frozen_temperature(mode, cfg.option_temperature,
                                               hierarchy.num_options)
         # the runner's structure (a saved policy rebuilds its runner from these)
-        self.runner_settings = dict(reset_pool=cfg.pool_size, frozen_eval=cfg.frozen_eval,
-                                    policy_memory=cfg.policy_memory)
+        run = cfg.run
+        self.runner_settings = dict(reset_pool=run.pool_size, frozen_eval=run.frozen_eval,
+                                    policy_memory=run.policy_memory)
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, **self.runner_settings)
         # what the policies see: its shape and dtype are all a learner's init reads, so it is
         # zeros of the observation's shape (traced, nothing compiles or runs)
@@ -137,7 +138,7 @@ class Engine:
     def _reset(self, key: jax.Array, start: jax.Array) -> EnvCarry:
         controls = Controls(jnp.asarray(NO_OPTION), start, jnp.zeros((self.h.num_options,), bool),
                             gamma=self.gamma, temperature=self.temperature)
-        return self.runner.reset(key, controls, self.cfg.num_envs)
+        return self.runner.reset(key, controls, self.cfg.run.num_envs)
 
     def joint_state(self, learners, bank, reset_keys: jax.Array, keys: jax.Array) -> SeedState:
         """Joint fine-tuning's start, per seed (leading axis S): a learner per option
@@ -244,7 +245,7 @@ class Engine:
                 return c, (tr, TickStats.of(ends))
 
             carry, (traj, stats) = jax.lax.scan(
-                tick_fn, carry, jax.random.split(k_roll, cfg.rollout_ticks))
+                tick_fn, carry, jax.random.split(k_roll, cfg.run.rollout_ticks))
             learner_state, carry, metrics = learn(st.learner, carry, traj, k_upd)
             stats = jax.tree.map(lambda x: x.sum(0), stats)
             running = None
@@ -258,7 +259,7 @@ class Engine:
             return (SeedState(carry, learner_state, key), win), (stats, metrics, running)
 
         (new, new_windows), (stats, metrics, running) = jax.lax.scan(
-            update_step, (state, windows), None, cfg.updates_per_chunk)
+            update_step, (state, windows), None, cfg.run.updates_per_chunk)
         new = select_tree(active, new, state)
         stats = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), stats)
         if windows is not None:

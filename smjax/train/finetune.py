@@ -123,7 +123,7 @@ class FinetuneStage:
     def account(self, st: TrainerState, seeds: list[int], out: ChunkOut) -> list[Scalar]:
         """Count the chunk toward these seeds' phase (the task's curve) and their turns'
         counters; remember the seeds whose task success reached the threshold."""
-        steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
+        steps_per_update = self.cfg.run.steps_per_update
         # joint learners' metrics at the phase's env steps before this chunk's
         scalars = self.joint_scalars(st, seeds, out)
         self.candidates = [s for s in seeds

@@ -86,7 +86,7 @@ class TensorBoardHook(Hook):
 
 
 class CheckpointHook(Hook):
-    """Checkpoints in ``out_dir`` every ``cfg.checkpoint_every`` seconds and when a stage
+    """Checkpoints in ``out_dir`` every ``cfg.run.checkpoint_every`` seconds and when a stage
     ends; with several processes every process runs it (saving is collective) and process
     0 writes. ``run_meta``: the run's identity (what a resume must match).
 
@@ -100,7 +100,7 @@ class CheckpointHook(Hook):
     STAGE_GAP_WRITES = 20
 
     def __init__(self, out_dir: str | Path, cfg: TrainConfig, run_meta: dict):
-        self.out_dir, self.run_meta, self.every = out_dir, run_meta, cfg.checkpoint_every
+        self.out_dir, self.run_meta, self.every = out_dir, run_meta, cfg.run.checkpoint_every
         # the settings a resume starts from unless told otherwise (not the run's identity)
         self.settings = {k: getattr(cfg, k) for k in RUN_SETTINGS}
         self.last_save = time.perf_counter()

@@ -78,7 +78,7 @@ class LevelStage:
     def account(self, st: TrainerState, seeds: list[int], out: ChunkOut) -> list[Scalar]:
         """Count the chunk toward these seeds' levels and record their curves; remember the
         seeds whose running success reached the threshold (``candidates``)."""
-        steps_per_update = self.cfg.num_envs * self.cfg.rollout_ticks
+        steps_per_update = self.cfg.run.steps_per_update
         scalars, self.candidates = [], []
         for s in seeds:
             plan, seed = self.plan(st, s), self.slots.seeds[s]

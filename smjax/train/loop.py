@@ -49,10 +49,10 @@ from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 
 def default_hooks(cfg, out_dir, progress: bool, run_meta: dict) -> list[Hook]:
     """The progress bar (process 0, unless ``progress`` is off), TensorBoard (process 0,
-    where ``cfg.tensorboard`` and an output directory) and checkpoints (``out_dir``)."""
+    where ``cfg.run.tensorboard`` and an output directory) and checkpoints (``out_dir``)."""
     writer = dist.is_writer()  # process 0: the only one that writes files or draws bars
     hooks: list[Hook] = [ProgressBar()] if progress and writer else []
-    if cfg.tensorboard and out_dir is not None and writer:
+    if cfg.run.tensorboard and out_dir is not None and writer:
         hooks.append(TensorBoardHook(Path(out_dir) / "tensorboard"))
     if out_dir is not None:
         hooks.append(CheckpointHook(out_dir, cfg, run_meta or {}))
@@ -78,14 +78,14 @@ class HierarchyTrainer:
         S = len(self.seeds)
         self.slots = Slots(self.seeds, configs if configs is not None else [cfg] * S,
                            {k: jnp.asarray(v, jnp.float32) for k, v in (hp or {}).items()},
-                           training_mesh(S, cfg.num_envs))
+                           training_mesh(S, cfg.run.num_envs))
         self.levels = LevelStage(engine, cfg, plans, self.slots)
         # after the levels, a seed fine-tunes (one stage more) unless it is off
         self.finetune = FinetuneStage(engine, cfg, plans, self.slots) if cfg.fine_tuning.on else None
         self.stages: list[Stage] = [self.levels] + ([self.finetune] if self.finetune else [])
         self.num_stages = len(plans) + (self.finetune is not None)
         self.state = TrainerState.new(plans, S)
-        self.runner = ChunkRunner(engine, self.slots, metrics=cfg.tensorboard)
+        self.runner = ChunkRunner(engine, self.slots, metrics=cfg.run.tensorboard)
         self.ahead, self.ahead_rest = ahead, False  # the rest: gate, joint chunk, evaluation
         keys = self.slots.committed(
             jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32)))
@@ -288,7 +288,7 @@ class HierarchyTrainer:
         st, cfg, training = self.state, self.cfg, self.training()
         report = ChunkReport(
             chunk=st.chunks, seconds=seconds,
-            steps=cfg.updates_per_chunk * cfg.num_envs * cfg.rollout_ticks * len(training),
+            steps=cfg.run.steps_per_chunk * len(training),
             scalars=scalars, seeds=[self.stage_of(s).status(st, s) for s in training],
             stages_done=int(sum(st.stage)), stage_ended=stage_ended)
         for hook in self.hooks:

@@ -50,12 +50,12 @@ ADVICE = {"batch": "--num-envs or --seeds", "pool": "reset_pool (--set reset_poo
 def estimate_parts(obs_bytes: int, state_bytes: int, cfg: TrainConfig,
                    num_seeds: int) -> dict[str, int]:
     """The estimate's bytes by the setting that sizes them (keys of ``ADVICE``)."""
-    env_bytes = obs_bytes + state_bytes
-    live = num_seeds * cfg.num_envs * env_bytes * STATE_COPIES
-    rollout = num_seeds * cfg.num_envs * cfg.rollout_ticks * (obs_bytes + TRANSITION_EXTRA_BYTES)
-    side = num_seeds * max(cfg.gate_envs, cfg.eval_envs) * env_bytes
+    env_bytes, run, evaluation = obs_bytes + state_bytes, cfg.run, cfg.evaluation
+    live = num_seeds * run.num_envs * env_bytes * STATE_COPIES
+    rollout = num_seeds * run.steps_per_update * (obs_bytes + TRANSITION_EXTRA_BYTES)
+    side = num_seeds * max(evaluation.gate_envs, evaluation.eval_envs) * env_bytes
     # the pool is carried (copied as the live state) and refilled by a batch of resets
-    pool = num_seeds * cfg.pool_size * env_bytes * (STATE_COPIES + 1)
+    pool = num_seeds * run.pool_size * env_bytes * (STATE_COPIES + 1)
     return {"batch": live + rollout + side, "pool": pool, "windows": window_bytes(cfg, num_seeds)}
 
 
@@ -67,7 +67,8 @@ def window_bytes(cfg: TrainConfig, num_seeds: int) -> int:
     """The running-success windows (carried, so copied as the live state) and the chunk's
     per-update view of them."""
     slots = num_seeds * cfg.window_slots
-    return slots * (WINDOW_SLOT_BYTES * STATE_COPIES + cfg.updates_per_chunk * WINDOW_OUTPUT_BYTES)
+    return slots * (WINDOW_SLOT_BYTES * STATE_COPIES
+                    + cfg.run.updates_per_chunk * WINDOW_OUTPUT_BYTES)
 
 
 def available_bytes() -> int | None:
@@ -91,11 +92,12 @@ def _gib(n: float) -> str:
 def check_fits(env, env_params, cfg: TrainConfig, num_seeds: int) -> int:
     """Refuse a batch whose estimated memory exceeds the device's, or whose element counts
     overflow the int32 indices XLA uses; returns the estimate in bytes."""
-    per_tick = num_seeds * cfg.num_envs * cfg.rollout_ticks
+    run = cfg.run
+    per_tick = num_seeds * run.steps_per_update
     if per_tick > INT32_LIMIT:
         raise MemoryEstimateError(
-            f"batch too large: {num_seeds} seeds x num_envs {cfg.num_envs} x rollout_ticks "
-            f"{cfg.rollout_ticks} = {per_tick:,} transitions per rollout exceeds 2**31; lower "
+            f"batch too large: {num_seeds} seeds x num_envs {run.num_envs} x rollout_ticks "
+            f"{run.rollout_ticks} = {per_tick:,} transitions per rollout exceeds 2**31; lower "
             f"--num-envs")
     obs_b, state_b = per_env_bytes(env, env_params)
     parts = estimate_parts(obs_b, state_b, cfg, num_seeds)
@@ -103,8 +105,8 @@ def check_fits(env, env_params, cfg: TrainConfig, num_seeds: int) -> int:
     if have is not None and need > have:
         largest = max(parts, key=parts.get)
         raise MemoryEstimateError(
-            f"batch too large: {num_seeds} seeds x num_envs {cfg.num_envs} (rollout_ticks "
-            f"{cfg.rollout_ticks}, reset_pool {cfg.pool_size}, success_window "
+            f"batch too large: {num_seeds} seeds x num_envs {run.num_envs} (rollout_ticks "
+            f"{run.rollout_ticks}, reset_pool {run.pool_size}, success_window "
             f"{cfg.window_slots}) needs at least an estimated {_gib(need)}, but "
             f"{jax.devices()[0].platform} memory is {_gib(have)}; lower {ADVICE[largest]}")
     return need

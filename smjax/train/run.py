@@ -306,5 +306,5 @@ def _policy_meta(task, engine: Engine, hierarchy_name: str, given: Hierarchy | N
         declared=None if given is None else declared_identity(given),
         learner={"algo": cfg.algo, "agent": dict(cfg.agent)},
         evaluation={"policy": engine.frozen_policy, "option_temperature": cfg.option_temperature,
-                    "gamma": engine.gamma, "episodes": cfg.eval_envs,
-                    "max_ticks": cfg.eval_max_ticks})
+                    "gamma": engine.gamma, "episodes": cfg.evaluation.eval_envs,
+                    "max_ticks": cfg.evaluation.eval_max_ticks})

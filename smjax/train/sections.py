@@ -2,8 +2,9 @@
 
 ``TrainConfig`` keeps one flat set of fields (the YAML keys and ``--set`` names every run
 records); the parts of training read typed sections of it, resolved once when the config
-is made: ``cfg.fine_tuning`` (:class:`FineTuning`), ``cfg.evaluation``
-(:class:`Evaluation`) and, per level, ``cfg.for_level(name)`` (``LevelSettings``).
+is made: ``cfg.run`` (:class:`Run`), ``cfg.fine_tuning`` (:class:`FineTuning`),
+``cfg.evaluation`` (:class:`Evaluation`) and, per level, ``cfg.for_level(name)``
+(``LevelSettings``).
 
 A config file or ``--set`` may also name a field by its section, ``fine_tuning.threshold``
 or a mapping ``fine_tuning: {threshold: 0.9}``; :data:`SECTIONS` is the one table that maps
@@ -16,6 +17,9 @@ from typing import Any
 
 # section -> {section field: TrainConfig field}
 SECTIONS: dict[str, dict[str, str]] = {
+    "run": {name: name for name in (
+        "num_envs", "rollout_ticks", "updates_per_chunk", "reset_pool", "frozen_eval",
+        "policy_memory", "checkpoint_every", "tensorboard")},
     "fine_tuning": {
         "enabled": "finetune", "mode": "finetune_mode", "threshold": "finetune_threshold",
         "option_threshold": "finetune_option_threshold",
@@ -36,6 +40,40 @@ SECTIONS: dict[str, dict[str, str]] = {
 
 class SectionError(ValueError):
     """A section or section field that does not exist."""
+
+
+@dataclass(frozen=True)
+class Run:
+    """How every seed's ticks run (the rollout's shape, the runner's structure) and what
+    the run writes beside its results."""
+
+    num_envs: int             # parallel environments per seed
+    rollout_ticks: int        # ticks per rollout (one learner update per rollout)
+    updates_per_chunk: int    # rollouts per compiled chunk
+    reset_pool: int | None    # as given (None: ``num_envs``); ``pool_size`` resolves it
+    frozen_eval: str          # how a tick runs the policy bank ("auto": by backend)
+    policy_memory: str        # "none" or "last_action"
+    checkpoint_every: float   # seconds between checkpoints (0: every chunk)
+    tensorboard: bool         # also write TensorBoard event files
+
+    @property
+    def pool_size(self) -> int:
+        """Episode starts per rollout (0: none, reset every tick)."""
+        return self.num_envs if self.reset_pool is None else self.reset_pool
+
+    @property
+    def steps_per_update(self) -> int:
+        """Env steps of one seed's rollout (one learner update)."""
+        return self.num_envs * self.rollout_ticks
+
+    @property
+    def steps_per_chunk(self) -> int:
+        """Env steps of one seed's chunk."""
+        return self.steps_per_update * self.updates_per_chunk
+
+    @classmethod
+    def of(cls, cfg) -> "Run":
+        return cls(**{name: getattr(cfg, flat) for name, flat in SECTIONS["run"].items()})
 
 
 @dataclass(frozen=True)
