@@ -140,13 +140,14 @@ def test_a_joint_rollout_records_every_learned_option(keydoor_engine):
     learned = jnp.ones((1, O), bool)
     sizes = jnp.asarray([[32, 32]], jnp.int32)
     windows = (SuccessWindow.empty(1, 32), SuccessWindow.empty(1, 32))
-    new, _, metrics, _, _ = engine.joint_chunk(
+    new, _, metrics, _, _, finite = engine.joint_chunk(
         state, jnp.ones((1,), bool), learned, jnp.ones((1,), jnp.float32),
         jnp.full((1, O), 0.99, jnp.float32), windows, sizes)
     decisions = np.asarray(metrics["decisions"])  # [1, U, O]
     assert decisions.shape == (1, SMALL["updates_per_chunk"], O)
     assert (decisions.sum(1) > 0).all(), decisions  # every option learned from something
     assert jax.tree.leaves(new.learner)[0].shape[:2] == (1, O)
+    assert bool(finite.all())
 
 
 def test_each_option_is_discounted_at_its_own_gamma(keydoor_engine):

@@ -16,7 +16,7 @@ import numpy as np
 from smjax.train import distributed as dist
 from smjax.train.ahead import CompileAhead, arguments, resolve
 from smjax.train.engine import ChunkControls
-from smjax.train.seed_arrays import NonFiniteError, all_finite
+from smjax.train.seed_arrays import NonFiniteError
 from smjax.train.slots import Slots
 from smjax.train.stages import ChunkOut, SeedControls
 
@@ -81,10 +81,11 @@ class ChunkRunner:
         args = self.level_args(controls, active, a)
         # one compile serves every level (ids are traced)
         self.level_program, compile_s = resolve(self.level_program, args, self._compile_level)
-        state, stats, metrics, (window, task_window), windows = self.level_program(*args)
-        stats, windows = dist.gather((stats, windows))  # [S, U, ...], the same on every process
+        state, stats, metrics, (window, task_window), windows, finite = self.level_program(*args)
+        # [S, U, ...], the same on every process
+        stats, windows, finite = dist.gather((stats, windows, finite))
         metrics = float64(dist.gather(metrics)) if self.metrics else None
-        if not all_finite(state.learner.params):
+        if not finite.all():
             raise NonFiniteError(f"non-finite learner parameters in {describe()}")
         slots.arrays = a.replace(state=state, window=window, task_window=task_window)
         return ChunkOut(stats, windows, metrics), compile_s
@@ -118,9 +119,9 @@ class ChunkRunner:
         a, slots = self.slots.arrays, self.slots
         args = self.joint_args(seeds, side_cost, gammas, sizes)
         self.joint_program, compile_s = resolve(self.joint_program, args, self._compile_joint)
-        state, stats, metrics, (window, task_window), windows = self.joint_program(*args)
-        stats, windows = dist.gather((stats, windows))
-        if not all_finite(state.learner.params):
+        state, stats, metrics, (window, task_window), windows, finite = self.joint_program(*args)
+        stats, windows, finite = dist.gather((stats, windows, finite))
+        if not finite.all():
             raise NonFiniteError(f"non-finite learner parameters in {describe()}")
         slots.arrays = a.replace(joint=state, window=window, task_window=task_window)
         out = ChunkOut(stats, windows)

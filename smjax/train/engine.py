@@ -25,6 +25,7 @@ from smjax.train.ahead import CompileAhead, resolve, signature
 from smjax.train.config import TrainConfig
 from smjax.train.learner import check_joint_learner, frozen_mode
 from smjax.train.program_cache import compile_program
+from smjax.train.seed_arrays import finite_flag
 
 
 def _same(x):
@@ -185,7 +186,8 @@ class Engine:
         batch goes in, and the chunk also returns, per update, each window's batch totals
         (newest first) and episodes (0 while not full); the host reduces them in float64
         (``SuccessWindow.push`` says why there). Without
-        ``windows`` (a benchmark timing the chunk alone) those outputs are None."""
+        ``windows`` (a benchmark timing the chunk alone) those outputs are None. The last
+        output says whether the learner's parameters are all finite."""
         controls = Controls(tick.learner, tick.start, learned, gamma=tick.gamma,
                             teleport=tick.teleport, continue_episodes=tick.continue_episodes,
                             temperature=self.temperature, side_cost=tick.side_cost)
@@ -265,7 +267,7 @@ class Engine:
         if windows is not None:
             new_windows = select_tree(active, new_windows, windows)
             running = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), running)
-        return new, stats, metrics, new_windows, running
+        return new, stats, metrics, new_windows, running, finite_flag(new.learner.params)
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
     def _run_episodes(self, args: tuple, num_envs: int) -> tuple[dict, float]:
