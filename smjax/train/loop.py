@@ -220,7 +220,8 @@ class HierarchyTrainer:
         out, compile_s = self.runner.run(
             controls, [s in training for s in range(len(self.seeds))], joint, st.chunks, where)
         st.compile_seconds += compile_s
-        self.compile_ahead(controls)  # a CPU: after it
+        if on_cpu:  # after it (``rehearse_changes`` says why)
+            self.compile_ahead(controls)
         return out
 
     def compile_ahead(self, controls: list[SeedControls], shapes: TrainArrays | None = None
