@@ -39,7 +39,7 @@ from smjax.train.levels import LevelStage, freeze_learners
 from smjax.train.plans import LevelPlan
 from smjax.train.progress import ProgressBar
 from smjax.train.seed_arrays import (  # noqa: F401 - NonFiniteError re-exported
-    NonFiniteError, local, select_seeds, split_seeds,
+    NonFiniteError, final_evaluation_keys, select_seeds, split_seeds,
 )
 from smjax.train.sharding import seed_sharding, training_mesh
 from smjax.train.slots import Slots
@@ -214,13 +214,17 @@ class HierarchyTrainer:
         where = lambda: ", ".join(  # noqa: E731
             f"seed {self.seeds[s]} level {c.level} ({c.name})"
             for s, c in ((s, self.stage_of(s).plan(st, s)) for s in training))
-        on_cpu = jax.default_backend() == "cpu"
-        if not on_cpu:  # beside the level chunk's compile
+        if self.ahead is None:
+            self.ahead = CompileAhead.for_backend()
+        # an accelerator's compile beside the level chunk's, a CPU's after it
+        # (``smjax.train.ahead``; ``rehearse_changes`` says why)
+        beside = self.ahead.from_start
+        if beside:
             self.compile_ahead(controls)
         out, compile_s = self.runner.run(
             controls, [s in training for s in range(len(self.seeds))], joint, st.chunks, where)
         st.compile_seconds += compile_s
-        if on_cpu:  # after it (``rehearse_changes`` says why)
+        if not beside:
             self.compile_ahead(controls)
         return out
 
@@ -231,8 +235,6 @@ class HierarchyTrainer:
         ``shapes``: the state's, where it is not built yet."""
         if self.ahead_rest:
             return
-        if self.ahead is None:
-            self.ahead = CompileAhead.for_backend()
         st, ahead, self.ahead_rest = self.state, self.ahead, True
         if ahead.on and shapes is None and not ahead.from_start:
             self.rehearse_changes()
@@ -310,7 +312,8 @@ class HierarchyTrainer:
         """The trained hierarchies on fresh teleport-free episodes, under the run's frozen
         policy (final_success) and every other mode; the run's raw results."""
         a, st = self.arrays, self.state
-        keys, k_eval = split_seeds(local(a.keys), 2)
+        # a saved policy keeps these keys (``eval_keys``), so evaluating it reproduces this
+        eval_keys = k_eval = final_evaluation_keys(a.keys)
         if self.slots.mesh is not None:
             k_eval = dist.place(k_eval, seed_sharding(self.slots.mesh, k_eval))
         by_policy = {}
@@ -327,5 +330,5 @@ class HierarchyTrainer:
                 "final": by_policy[self.engine.frozen_policy], "final_by_policy": by_policy,
                 "eval_policy": self.engine.frozen_policy,
                 "finetune": st.finetune_record() if self.finetune else None,
-                "bank": a.bank, "learned": a.learned,
+                "bank": a.bank, "learned": a.learned, "eval_keys": eval_keys,
                 "wall_seconds": st.wall_seconds, "compile_seconds": st.compile_seconds}

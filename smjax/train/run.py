@@ -28,7 +28,6 @@ from smjax.train.outdir import DirLock, OutDirError, prepare_out_dir
 from smjax.train.restorable import check_restorable
 from smjax.train.reward_probe import nonfinite_reward
 from smjax.train.results import ResultsError, ResultsHook, build_results, write_sweep
-from smjax.train.seed_arrays import final_evaluation_keys
 from smjax.train.sweep import normalize_sweep, point_config, point_raw, slot_layout, sweep_points
 
 
@@ -200,7 +199,6 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
         ahead.close()
         raise
     raw = _train(trainer, env, env_params, out_dir)
-    raw["eval_keys"] = final_evaluation_keys(trainer.arrays.keys)
     extra = {"hierarchy_used": resolved.hierarchy_name, "env_overrides": env_overrides,
              "success_unbounded": not engine.root_has_threshold}
     return _results(trainer, env.name, cfg, seeds, raw, extra, out_dir, points)

@@ -73,7 +73,7 @@ class Run:
 
     @classmethod
     def of(cls, cfg) -> "Run":
-        return cls(**{name: getattr(cfg, flat) for name, flat in SECTIONS["run"].items()})
+        return cls(**section_values(cfg, "run"))
 
 
 @dataclass(frozen=True)
@@ -120,7 +120,12 @@ class Evaluation:
 
     @classmethod
     def of(cls, cfg) -> "Evaluation":
-        return cls(**{name: getattr(cfg, flat) for name, flat in SECTIONS["evaluation"].items()})
+        return cls(**section_values(cfg, "evaluation"))
+
+
+def section_values(cfg, section: str) -> dict:
+    """A section's fields, read from the config's flat fields by the table."""
+    return {name: getattr(cfg, flat) for name, flat in SECTIONS[section].items()}
 
 
 def flatten_sections(data: dict) -> dict:
