@@ -245,7 +245,7 @@ def batch_description(cfg, slots: int) -> str:
     parts = [f"{slots} seed(s) x num_envs {cfg.run.num_envs}"]
     if cfg.run.reset_pool is not None:
         parts.append(f"reset_pool {cfg.run.reset_pool}")
-    if cfg.window_slots != type(cfg)().success_window:
+    if cfg.window_slots != type(cfg).success_window:  # (the field's default)
         parts.append(f"success_window {cfg.window_slots}")
     if "hidden_sizes" in cfg.agent:
         parts.append(f"hidden_sizes {short_text(str(cfg.agent['hidden_sizes']), 40)}")

@@ -79,3 +79,15 @@ def test_sections_and_flat_fields_make_the_same_config(threshold, envs, gate, ep
     cfg = TrainConfig.from_dict(nested)
     assert cfg == TrainConfig.from_dict(flat) and cfg.to_dict() == TrainConfig(**flat).to_dict()
     assert cfg.fine_tuning.threshold == threshold and cfg.evaluation.gate_envs == envs
+
+
+def test_fine_tuning_enabled_reads_true_and_false_as_on_and_off(tmp_path):
+    # YAML 1.1 reads ``enabled: off`` as false: it must mean "off", not be refused
+    path = tmp_path / "off.yaml"
+    path.write_text("fine_tuning:\n  enabled: off\n")
+    assert resolve_config(file=path).finetune == "off"
+    assert not resolve_config(file=path).fine_tuning.on
+    assert resolve_config(sets={"fine_tuning.enabled": True}).finetune == "on"
+    assert TrainConfig(finetune=False) == TrainConfig(finetune="off")
+    with pytest.raises(ConfigError, match="'finetune'.*one of"):
+        TrainConfig(finetune="maybe")

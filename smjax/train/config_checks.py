@@ -29,11 +29,14 @@ class ConfigError(ValueError):
 
 def field_values(cfg) -> dict:
     """Every field of ``cfg`` checked against the bounds table (``smjax.train.bounds``),
-    numpy scalars as Python numbers."""
+    numpy scalars as Python numbers, a true or false ``finetune`` as "on" or "off"."""
     try:
-        return checked_fields({f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)})
+        values = checked_fields({f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)})
     except BoundsError as err:
         raise ConfigError(str(err)) from None
+    if isinstance(values["finetune"], bool):  # YAML 1.1 reads ``finetune: off`` as false
+        values["finetune"] = "on" if values["finetune"] else "off"
+    return values
 
 
 def check_fields(cfg) -> None:
