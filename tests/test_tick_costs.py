@@ -16,7 +16,7 @@ from hier_env import KeyDoor, make_keydoor
 from smjax.agents import make_agent
 from smjax.options.runner import Controls, HierarchyRunner
 from smjax.train.config import TrainConfig
-from smjax.options.episodes import early_stop_bounds
+from smjax.options.episodes import early_stop_bounds, seed_batched_episodes
 from smjax.train.engine import Engine, SeedState
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -98,6 +98,28 @@ def test_gate_stops_early_with_the_same_decision():
         np.testing.assert_array_equal(np.asarray(early["success"]) >= threshold,
                                       np.asarray(full["success"]) >= threshold)
         assert (np.asarray(early["env_steps"]) <= np.asarray(full["env_steps"])).all()
+
+
+def test_seeds_one_after_another_give_each_seed_what_side_by_side_gives():
+    """A CPU runs the episodes program's seeds one after another: each seed's numbers are
+    those of the seeds side by side, and a skipped seed reports no env steps."""
+    cfg = TrainConfig(num_envs=8, gate_envs=16, gate_max_ticks=60)
+    engine, state = _engine(cfg)
+    bank = engine.new_bank(state.learner)
+    learned = jnp.zeros((3, engine.h.num_options), bool).at[:, 0].set(True)
+    keys = jax.random.split(jax.random.PRNGKey(7), 3)
+    results = {}
+    for one_at_a_time in (False, True):
+        engine.episodes = seed_batched_episodes(engine.runner, engine.gamma, one_at_a_time)
+        engine._compiled_episodes = {}
+        for due in ([True] * 3, [False, True, False]):
+            results[one_at_a_time, sum(due)], _ = engine.gate(
+                keys, state, bank, learned, [1] * 3, [0] * 3, due, [0.8] * 3)
+    for name in results[False, 3]:
+        np.testing.assert_array_equal(results[False, 3][name], results[True, 3][name])
+        np.testing.assert_array_equal(np.asarray(results[False, 1][name])[1],
+                                      np.asarray(results[True, 1][name])[1])
+    assert (np.asarray(results[True, 1]["env_steps"]) > 0).tolist() == [False, True, False]
 
 
 def test_evaluation_and_gate_share_one_compiled_program():

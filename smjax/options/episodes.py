@@ -121,13 +121,40 @@ def first_episodes(runner, key, learner_params, bank, learned, learner, start, t
 # ``first_episodes``' axes under a vmap over seeds: teleport and max_ticks are shared,
 # ``num_envs`` is static
 SEED_AXES = (0, 0, 0, 0, 0, 0, None, 0, None, 0, 0)
+SKIP = 9  # the position of ``skip`` among them
 
 
-def seed_batched_episodes(runner, gamma: float):
+def seed_batched_episodes(runner, gamma: float, seed_by_seed: bool = False):
     """``first_episodes`` of ``runner`` (at discount ``gamma``) compiled over a leading
     seed axis: ``f(key, learner_params, bank, learned, learner, start, teleport,
-    temperature, max_ticks, skip, decide, num_envs)``."""
+    temperature, max_ticks, skip, decide, num_envs)``.
+
+    Side by side (``vmap``), every seed ticks until the last one's episodes end and a
+    skipped seed costs as much as the others: right where seeds run in parallel (a GPU).
+    ``seed_by_seed`` runs them one after another (``lax.map``), each until its own episodes
+    end, and a skipped seed not at all: right where compute is serial (a CPU), as in a gate
+    or a fine-tuning check that concerns one seed of many. Each seed's result is the same."""
     def episodes(*args):
         return first_episodes(runner, *args, gamma=gamma)
 
-    return jax.jit(jax.vmap(episodes, in_axes=SEED_AXES + (None,)), static_argnums=(11,))
+    if not seed_by_seed:
+        return jax.jit(jax.vmap(episodes, in_axes=SEED_AXES + (None,)), static_argnums=(11,))
+
+    def one_after_another(*args):
+        *inputs, num_envs = args
+
+        def one(per_seed):
+            values = iter(per_seed)
+            full = [next(values) if axis == 0 else x for x, axis in zip(inputs, SEED_AXES)]
+
+            def run():
+                return episodes(*full, num_envs)
+
+            def skipped():  # nothing due: zeros (a skipped seed's result is meaningless)
+                return jax.tree.map(lambda r: jnp.zeros(r.shape, r.dtype), jax.eval_shape(run))
+
+            return jax.lax.cond(full[SKIP], skipped, run)
+
+        return jax.lax.map(one, [x for x, axis in zip(inputs, SEED_AXES) if axis == 0])
+
+    return jax.jit(one_after_another, static_argnums=(11,))

@@ -84,8 +84,11 @@ class Engine:
         # every argument has a seed axis: each seed trains its own level (or fine-tunes)
         self.chunk = jax.jit(jax.vmap(self.seed_chunk), donate_argnums=(0,))
         self.joint_chunk = jax.jit(jax.vmap(self._joint_chunk), donate_argnums=(0,))
-        # the gate's and the evaluation's episodes (``first_episodes``), one program
-        self.episodes = seed_batched_episodes(self.runner, self.gamma)
+        # the gate's and the evaluation's episodes (``first_episodes``), one program; on
+        # one CPU device the seeds run one after another, each only as long as it needs
+        self.episodes = seed_batched_episodes(
+            self.runner, self.gamma,
+            seed_by_seed=jax.default_backend() == "cpu" and jax.device_count() == 1)
         self._compiled_episodes: dict[tuple, Any] = {}
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
