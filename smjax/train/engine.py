@@ -84,8 +84,7 @@ class Engine:
         # every argument has a seed axis: each seed trains its own level (or fine-tunes)
         self.chunk = jax.jit(jax.vmap(self.seed_chunk), donate_argnums=(0,))
         self.joint_chunk = jax.jit(jax.vmap(self._joint_chunk), donate_argnums=(0,))
-        # the gate's and the evaluation's episodes (``first_episodes``), one program; on
-        # one CPU device the seeds run one after another, each only as long as it needs
+        # the gate's and the evaluation's episodes, one program (seed by seed on one CPU)
         self.episodes = seed_batched_episodes(
             self.runner, self.gamma,
             seed_by_seed=jax.default_backend() == "cpu" and jax.device_count() == 1)
