@@ -114,8 +114,10 @@ def profile(args) -> dict:
         print(f"{name:12s} {run_s:8.3f} s  compile {compile_s:6.1f} s  "
               f"{n / run_s:12,.0f} env steps/s", flush=True)
 
-    # the whole chunk, as the trainer calls it (no donation here, so it can repeat)
-    chunk = jax.vmap(engine.seed_chunk)
+    # the whole chunk, as the trainer calls it (no donation here, so it can repeat); or
+    # with its seeds one after another instead of side by side
+    chunk = jax.vmap(engine.seed_chunk) if not args.seed_by_seed else (
+        lambda *xs: jax.lax.map(lambda per_seed: engine.seed_chunk(*per_seed), xs))
     # a level's per-seed switches, those this tree's chunk takes (older trees take fewer)
     level = {"teleport": jnp.ones((S,), bool), "continue_episodes": jnp.zeros((S,), bool),
              "side_cost": jnp.zeros((S,), jnp.float32),
@@ -301,6 +303,8 @@ def main(argv=None) -> None:
     ap.add_argument("--parts", nargs="+", default=[], metavar="PART",
                     help="time only these parts (chunk, rollout, update, ..., gate; "
                          "default: all); each part compiles its own program")
+    ap.add_argument("--seed-by-seed", action="store_true",
+                    help="time the chunk with its seeds one after another (lax.map), not side by side")
     ap.add_argument("--json", help="also write the result here")
     args = ap.parse_args(argv)
     out = profile(args)
