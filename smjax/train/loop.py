@@ -71,8 +71,8 @@ class HierarchyTrainer:
         per slot, the config its run alone has (a sweep point's; default the engine's).
         ``hooks``: the side jobs (default: ``default_hooks``). ``ahead``: where the run's
         programs compile ahead (``smjax.train.ahead``; with ``from_start``, the level chunk
-        from here on, while the trainer builds its state; None: one made by the first
-        chunk)."""
+        from here on, while the trainer builds its state; None: the backend's, its level
+        chunk compiled where it first runs)."""
         cfg = self.cfg = engine.cfg
         self.engine, self.plans, self.seeds = engine, plans, list(seeds)
         S = len(self.seeds)
@@ -86,7 +86,8 @@ class HierarchyTrainer:
         self.num_stages = len(plans) + (self.finetune is not None)
         self.state = TrainerState.new(plans, S)
         self.runner = ChunkRunner(engine, self.slots, metrics=cfg.run.tensorboard)
-        self.ahead, self.ahead_rest = ahead, False  # the rest: gate, joint chunk, evaluation
+        self.ahead = ahead if ahead is not None else CompileAhead.for_backend()
+        self.ahead_rest = False  # the rest submitted: gate, joint chunk, evaluation
         keys = self.slots.committed(
             jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32)))
         if ahead is not None and ahead.on and ahead.from_start and self.slots.mesh is None:
@@ -152,8 +153,7 @@ class HierarchyTrainer:
         try:
             return self.train_and_evaluate(t_start)
         finally:
-            if self.ahead is not None:
-                self.ahead.close()
+            self.ahead.close()
 
     def train_and_evaluate(self, t_start: float) -> dict:
         """The driver loop: chunks, the stages' accounts and decisions, hooks; then the
@@ -214,8 +214,6 @@ class HierarchyTrainer:
         where = lambda: ", ".join(  # noqa: E731
             f"seed {self.seeds[s]} level {c.level} ({c.name})"
             for s, c in ((s, self.stage_of(s).plan(st, s)) for s in training))
-        if self.ahead is None:
-            self.ahead = CompileAhead.for_backend()
         # an accelerator's compile beside the level chunk's, a CPU's after it
         # (``smjax.train.ahead``; ``rehearse_changes`` says why)
         beside = self.ahead.from_start
