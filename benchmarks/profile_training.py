@@ -2,10 +2,11 @@
 
 Builds the training ``Engine`` for a task (any environment, hierarchy, learner) with the
 trainer's own shapes (seeds x envs x ticks x updates) at a chosen level, and times, each
-as its own compiled, seed-vmapped program over the same shapes (median of ``--repeats``
-runs, compile timed apart):
+as its own compiled program over the same shapes, the parts seed-vmapped (median of
+``--repeats`` runs, compile timed apart):
 
-* ``chunk``: ``Engine.chunk`` exactly as the trainer calls it (rollouts + updates);
+* ``chunk``: ``Engine.chunk`` as the trainer calls it (rollouts + updates; its seeds side by
+  side or one after another, as on this backend, or as ``--seed-by-seed`` says);
 * ``rollout``: the chunk's rollouts alone (hierarchical ticks, no update);
 * ``update``: the learner's updates alone (on a rollout's trajectory);
 * ``env_step``: the environment's ``step_env`` alone, same number of steps;
@@ -114,9 +115,12 @@ def profile(args) -> dict:
         print(f"{name:12s} {run_s:8.3f} s  compile {compile_s:6.1f} s  "
               f"{n / run_s:12,.0f} env steps/s", flush=True)
 
-    # the whole chunk, as the trainer calls it (no donation here, so it can repeat); or
-    # with its seeds one after another instead of side by side
-    chunk = jax.vmap(engine.seed_chunk) if not args.seed_by_seed else (
+    # the whole chunk, its seeds arranged as the trainer arranges them (trees without
+    # ``Engine.seed_by_seed``: side by side) unless --seed-by-seed says; no donation here,
+    # so it can repeat
+    one_after_another = {"on": True, "off": False}.get(
+        args.seed_by_seed, getattr(engine, "seed_by_seed", False))
+    chunk = jax.vmap(engine.seed_chunk) if not one_after_another else (
         lambda *xs: jax.lax.map(lambda per_seed: engine.seed_chunk(*per_seed), xs))
     # a level's per-seed switches, those this tree's chunk takes (older trees take fewer)
     level = {"teleport": jnp.ones((S,), bool), "continue_episodes": jnp.zeros((S,), bool),
@@ -303,8 +307,9 @@ def main(argv=None) -> None:
     ap.add_argument("--parts", nargs="+", default=[], metavar="PART",
                     help="time only these parts (chunk, rollout, update, ..., gate; "
                          "default: all); each part compiles its own program")
-    ap.add_argument("--seed-by-seed", action="store_true",
-                    help="time the chunk with its seeds one after another (lax.map), not side by side")
+    ap.add_argument("--seed-by-seed", choices=("auto", "on", "off"), default="auto",
+                    help="the chunk's seeds one after another (on: lax.map) or side by side "
+                         "(off: vmap); auto: as the trainer runs them on this backend")
     ap.add_argument("--json", help="also write the result here")
     args = ap.parse_args(argv)
     out = profile(args)

@@ -17,7 +17,8 @@ from smjax.agents import make_agent
 from smjax.options.runner import Controls, HierarchyRunner
 from smjax.train.config import TrainConfig
 from smjax.options.episodes import early_stop_bounds, seed_batched_episodes
-from smjax.train.engine import Engine, SeedState
+from smjax.train.engine import ChunkControls, Engine, SeedState
+from smjax.train.seed_arrays import over_seeds
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -120,6 +121,36 @@ def test_seeds_one_after_another_give_each_seed_what_side_by_side_gives():
         np.testing.assert_array_equal(np.asarray(results[False, 1][name])[1],
                                       np.asarray(results[True, 1][name])[1])
     assert (np.asarray(results[True, 1]["env_steps"]) > 0).tolist() == [False, True, False]
+
+
+def _chunk(engine, state, active, one_after_another):
+    S = len(active)
+    tick = ChunkControls(jnp.zeros(S, jnp.int32), jnp.zeros(S, jnp.int32), jnp.ones(S, bool),
+                         jnp.zeros(S, bool), jnp.zeros(S), jnp.full(S, 0.99))
+    chunk = jax.jit(over_seeds(engine.seed_chunk, one_after_another))
+    return chunk(state, jnp.asarray(active), engine.new_bank(state.learner),
+                 jnp.zeros((S, engine.h.num_options), bool), tick)
+
+
+def test_a_chunk_seed_by_seed_trains_as_side_by_side_and_leaves_idle_seeds_alone():
+    """On one CPU a chunk runs its seeds one after another: each seed learns what it learns
+    side by side (to float tolerance), an idle seed keeps its state and counts nothing, and
+    a seed's numbers do not depend on the seeds beside it."""
+    engine, state = _engine(TrainConfig(num_envs=8, rollout_ticks=8, updates_per_chunk=1))
+    active = [True, False, True]
+    side, serial = (_chunk(engine, state, active, serial) for serial in (False, True))
+    for out in (side, serial):
+        new, stats = out[0], out[1]
+        jax.tree.map(lambda a, b: np.testing.assert_array_equal(a[1], b[1]), new, state)
+        jax.tree.map(lambda x: np.testing.assert_array_equal(x[1], 0), stats)
+        assert (np.asarray(stats.learner_decisions)[[0, 2]] > 0).all()
+        assert bool(out[5].all())
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5),
+                 side[0].learner.params, serial[0].learner.params)
+    # seed 2 alone, one after another: the same bits as beside seeds 0 and 1
+    alone = _chunk(engine, jax.tree.map(lambda x: x[2:], state), [True], True)
+    jax.tree.map(lambda a, b: np.testing.assert_array_equal(a[0], b[2]),
+                 (alone[0], alone[1]), (serial[0], serial[1]))
 
 
 def test_evaluation_and_gate_share_one_compiled_program():

@@ -3,10 +3,12 @@
 One compiled ``chunk`` serves every level of every method: the option being trained,
 the option each episode starts from and the set of learned options are traced
 arrays, and every learner has the same padded action head (all primitives + all
-templates, masked per option). Seeds are a leading ``vmap`` axis.
+templates, masked per option). Seeds are a leading axis: side by side (``vmap``) on a
+GPU or several devices, one after another on one CPU device (``over_seeds``).
 """
 from __future__ import annotations
 
+import functools
 from typing import Any, NamedTuple
 
 import jax
@@ -15,7 +17,6 @@ import numpy as np
 
 from smjax.agents.option_batch import joint_batch, options_update
 from smjax.agents.smdp import carry_pending
-from smjax.core.env import select_tree
 from smjax.options.bank import frozen_temperature
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
@@ -23,9 +24,8 @@ from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-export
 from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
 from smjax.train.ahead import CompileAhead, resolve, signature
 from smjax.train.config import TrainConfig
-from smjax.train.learner import check_joint_learner, frozen_mode
 from smjax.train.program_cache import compile_program
-from smjax.train.seed_arrays import finite_flag
+from smjax.train.seed_arrays import finite_flag, over_seeds
 
 
 def _same(x):
@@ -55,14 +55,13 @@ class ChunkControls(NamedTuple):
 
 
 class Engine:
-    """Builds the jitted, seed-vmapped functions for one (env, hierarchy, agent, config)."""
+    """Builds the jitted functions over seeds for one (env, hierarchy, agent, config)."""
 
     def __init__(self, env, env_params, hierarchy: Hierarchy, agent, cfg: TrainConfig):
-        # refused before the first program below compiles: the joint chunk is built here
-        check_joint_learner(cfg, agent)
         self.env, self.env_params, self.h, self.agent, self.cfg = env, env_params, hierarchy, agent, cfg
-        mode = frozen_mode(cfg, agent)
-        self.frozen_policy = mode
+        # how frozen policies act: the config's choice, else what the learner declares
+        self.frozen_policy = mode = (agent.frozen_policy if cfg.frozen_policy == "auto"
+                                     else cfg.frozen_policy)
         # The ticks' settings from the config, computed once and passed in every
         # ``Controls``: the discount, and the temperature frozen policies pick at. One
         # runner serves training, the gate and evaluation; the gate and evaluation run the
@@ -81,13 +80,15 @@ class Engine:
         obs = jax.eval_shape(self._example_obs, jax.random.PRNGKey(0), env_params)
         self.example_obs = np.zeros(obs.shape, obs.dtype)
         self.num_actions = hierarchy.num_actions
-        # every argument has a seed axis: each seed trains its own level (or fine-tunes)
-        self.chunk = jax.jit(jax.vmap(self.seed_chunk), donate_argnums=(0,))
-        self.joint_chunk = jax.jit(jax.vmap(self._joint_chunk), donate_argnums=(0,))
-        # the gate's and the evaluation's episodes, one program (seed by seed on one CPU)
-        self.episodes = seed_batched_episodes(
-            self.runner, self.gamma,
-            seed_by_seed=jax.default_backend() == "cpu" and jax.device_count() == 1)
+        # every argument has a seed axis: each seed trains its own level (or fine-tunes),
+        # side by side, or one after another where compute is serial (one CPU device):
+        # there a seed's work ends with its own, and an idle seed costs nothing
+        self.seed_by_seed = jax.default_backend() == "cpu" and jax.device_count() == 1
+        seeds = functools.partial(over_seeds, one_after_another=self.seed_by_seed)
+        self.chunk = jax.jit(seeds(self.seed_chunk), donate_argnums=(0,))
+        self.joint_chunk = jax.jit(seeds(self._joint_chunk), donate_argnums=(0,))
+        # the gate's and the evaluation's episodes, one program
+        self.episodes = seed_batched_episodes(self.runner, self.gamma, self.seed_by_seed)
         self._compiled_episodes: dict[tuple, Any] = {}
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
@@ -125,13 +126,10 @@ class Engine:
 
     # ---- state -----------------------------------------------------------------
     def init_learner(self, keys: jax.Array):
-        """Fresh learner states for each seed (leading axis S).
-
-        Initialised one seed at a time and stacked (once per level, so cheap): without the
-        scheduler flag set in ``smjax/__init__.py``, XLA:CPU (jaxlib 0.10) deadlocks running
-        ``jit(vmap(init))`` of these networks for some sizes; this keeps init safe even when
-        a user has opted out of that flag.
-        """
+        """Fresh learner states for each seed (leading axis S), initialised one seed at a
+        time and stacked (once per level, so cheap): XLA:CPU (jaxlib 0.10) can deadlock in
+        ``jit(vmap(init))`` of these networks without the scheduler flag that
+        ``smjax/__init__.py`` sets, and a user may opt out of that flag."""
         return self._stack([self._init_one(k) for k in keys])
 
     def warm_start(self, states, params):
@@ -173,7 +171,7 @@ class Engine:
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
     def seed_chunk(self, state: SeedState, active, bank, learned, tick: ChunkControls,
                    windows=None, sizes=None):
-        """One seed's chunk (``chunk`` is this, vmapped over seeds and compiled).
+        """One seed's chunk (``chunk`` is this over seeds, compiled).
 
         ``active``: whether the seed trains (the others keep their state); ``bank``: the
         frozen policies; ``learned``: bool [O], the options in the bank; ``tick``: the
@@ -187,9 +185,8 @@ class Engine:
         of 0: the seed is not fine-tuning, its task window is left as it is). Each update's
         batch goes in, and the chunk also returns, per update, each window's batch totals
         (newest first) and episodes (0 while not full); the host reduces them in float64
-        (``SuccessWindow.push`` says why there). Without
-        ``windows`` (a benchmark timing the chunk alone) those outputs are None. The last
-        output says whether the learner's parameters are all finite."""
+        (``SuccessWindow.push`` says why). Without ``windows`` (a benchmark timing the chunk
+        alone) those outputs are None. The last says if the learner's params are finite."""
         controls = Controls(tick.learner, tick.start, learned, gamma=tick.gamma,
                             teleport=tick.teleport, continue_episodes=tick.continue_episodes,
                             temperature=self.temperature, side_cost=tick.side_cost)
@@ -262,13 +259,17 @@ class Engine:
                 win, running = (learner_win, task_win), (learner_out, task_out)
             return (SeedState(carry, learner_state, key), win), (stats, metrics, running)
 
-        (new, new_windows), (stats, metrics, running) = jax.lax.scan(
-            update_step, (state, windows), None, cfg.run.updates_per_chunk)
-        new = select_tree(active, new, state)
-        stats = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), stats)
-        if windows is not None:
-            new_windows = select_tree(active, new_windows, windows)
-            running = jax.tree.map(lambda x: jnp.where(active, x, jnp.zeros_like(x)), running)
+        def train():
+            (new, new_windows), (stats, metrics, running) = jax.lax.scan(
+                update_step, (state, windows), None, cfg.run.updates_per_chunk)
+            return new, stats, metrics, new_windows, running
+
+        def keep():  # an idle seed: its state and windows as they were, nothing counted
+            zeros = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(train))
+            return state, zeros[1], zeros[2], windows, zeros[4]
+
+        # seed by seed, an idle seed skips the work; side by side, it is computed and dropped
+        new, stats, metrics, new_windows, running = jax.lax.cond(active, train, keep)
         return new, stats, metrics, new_windows, running, finite_flag(new.learner.params)
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
