@@ -127,6 +127,7 @@ def _chunk(engine, state, active, one_after_another):
     S = len(active)
     tick = ChunkControls(jnp.zeros(S, jnp.int32), jnp.zeros(S, jnp.int32), jnp.ones(S, bool),
                          jnp.zeros(S, bool), jnp.zeros(S), jnp.full(S, 0.99))
+    engine.seed_by_seed = one_after_another  # side by side: an idle seed's work is dropped
     chunk = jax.jit(over_seeds(engine.seed_chunk, one_after_another))
     return chunk(state, jnp.asarray(active), engine.new_bank(state.learner),
                  jnp.zeros((S, engine.h.num_options), bool), tick)

@@ -17,6 +17,7 @@ import numpy as np
 
 from smjax.agents.option_batch import joint_batch, options_update
 from smjax.agents.smdp import carry_pending
+from smjax.core.env import select_tree
 from smjax.options.bank import frozen_temperature
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
@@ -75,8 +76,7 @@ class Engine:
         self.runner_settings = dict(reset_pool=run.pool_size, frozen_eval=run.frozen_eval,
                                     policy_memory=run.policy_memory)
         self.runner = HierarchyRunner(env, env_params, hierarchy, agent, **self.runner_settings)
-        # what the policies see: its shape and dtype are all a learner's init reads, so it is
-        # zeros of the observation's shape (traced, nothing compiles or runs)
+        # what the policies see: a learner's init reads only its shape and dtype (traced)
         obs = jax.eval_shape(self._example_obs, jax.random.PRNGKey(0), env_params)
         self.example_obs = np.zeros(obs.shape, obs.dtype)
         self.num_actions = hierarchy.num_actions
@@ -164,10 +164,6 @@ class Engine:
         obs, _ = self.env.reset_env(key, env_params)
         return self.runner.policy_obs(obs[None])[0]
 
-    @staticmethod
-    def store_in_bank(bank, params, option: int):
-        return jax.tree.map(lambda b, p: b.at[:, option].set(p), bank, params)
-
     # ---- one compiled chunk: updates_per_chunk x (rollout + update) ---------------
     def seed_chunk(self, state: SeedState, active, bank, learned, tick: ChunkControls,
                    windows=None, sizes=None):
@@ -208,8 +204,8 @@ class Engine:
         return self._updates(state, active, controls, None, self._learn_joint, windows, sizes)
 
     def _update(self, learner, pending, traj, key):
-        """One learner's update on a rollout; (learner, its new pending decisions, metrics).
-        Decisions whose option still runs train in the next rollout, once complete."""
+        """One learner's update on a rollout; (learner, its new pending decisions, metrics):
+        decisions whose option still runs train in the next rollout, once complete."""
         traj, pending = carry_pending(pending, traj)
         learner, metrics = self.agent.update(learner, traj, key)
         return learner, pending, metrics
@@ -220,9 +216,8 @@ class Engine:
         return learner, carry.replace(pending=pending), metrics
 
     def _learn_joint(self, learners, carry: EnvCarry, traj, key):
-        """Every option's update on its own rows of the rollout, each with its own pending
-        decisions (``carry.pending``: leading axis O), in one ``update_options`` (the
-        agent's, whose work follows the decisions, or one update per option)."""
+        """Every option's update on its own rows of the rollout and pending decisions
+        (``carry.pending``: axis O), in one ``update_options`` (the agent's, or per option)."""
         batch, pending = joint_batch(carry.pending, traj)
         learners, metrics = options_update(self.agent)(learners, batch, key)
         return learners, carry.replace(pending=pending), metrics
@@ -264,12 +259,16 @@ class Engine:
                 update_step, (state, windows), None, cfg.run.updates_per_chunk)
             return new, stats, metrics, new_windows, running
 
-        def keep():  # an idle seed: its state and windows as they were, nothing counted
-            zeros = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(train))
+        def keep(shapes):  # an idle seed: its state and windows as they were, nothing counted
+            zeros = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
             return state, zeros[1], zeros[2], windows, zeros[4]
 
-        # seed by seed, an idle seed skips the work; side by side, it is computed and dropped
-        new, stats, metrics, new_windows, running = jax.lax.cond(active, train, keep)
+        if self.seed_by_seed:  # an idle seed skips the work
+            out = jax.lax.cond(active, train, lambda: keep(jax.eval_shape(train)))
+        else:  # side by side (a cond would run both branches): computed and dropped
+            trained = train()
+            out = select_tree(active, trained, keep(trained))
+        new, stats, metrics, new_windows, running = out
         return new, stats, metrics, new_windows, running, finite_flag(new.learner.params)
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
