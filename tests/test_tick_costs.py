@@ -18,7 +18,7 @@ from smjax.options.runner import Controls, HierarchyRunner
 from smjax.train.config import TrainConfig
 from smjax.options.episodes import early_stop_bounds, seed_batched_episodes
 from smjax.train.engine import ChunkControls, Engine, SeedState
-from smjax.train.seed_arrays import over_seeds
+from smjax.core.env import over_seeds
 
 ROOT = Path(__file__).resolve().parents[1]
 

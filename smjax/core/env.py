@@ -51,6 +51,26 @@ def select_tree(pred: jax.Array, on_true: Any, on_false: Any) -> Any:
     return jax.tree.map(lambda a, b: jnp.where(pred, a, b), on_true, on_false)
 
 
+def over_seeds(fn, one_after_another: bool, in_axes: int | tuple = 0):
+    """``fn`` of one seed over arguments with a leading seed axis (``in_axes`` as ``vmap``'s:
+    0, or per argument 0 or None for one shared by every seed): side by side (``vmap``), or
+    one seed after another (``lax.map``), where a ``lax.cond`` branches for that seed alone
+    and a loop ends with its own work: right where compute is serial (one CPU device)."""
+    if not one_after_another:
+        return jax.vmap(fn, in_axes=in_axes)
+
+    def mapped(*args):
+        axes = in_axes if isinstance(in_axes, tuple) else (in_axes,) * len(args)
+
+        def one(per_seed):
+            values = iter(per_seed)
+            return fn(*[next(values) if axis == 0 else x for x, axis in zip(args, axes)])
+
+        return jax.lax.map(one, [x for x, axis in zip(args, axes) if axis == 0])
+
+    return mapped
+
+
 class Environment(Generic[TEnvState, TEnvParams]):
     """Base class of smjax environments."""
 

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from smjax.core.env import over_seeds
 from smjax.options.bank import option_temperatures
 from smjax.options.carry import Controls
 
@@ -135,26 +136,16 @@ def seed_batched_episodes(runner, gamma: float, seed_by_seed: bool = False):
     end, and a skipped seed not at all: right where compute is serial (a CPU), as in a gate
     or a fine-tuning check that concerns one seed of many. Each seed's result is the same."""
     def episodes(*args):
-        return first_episodes(runner, *args, gamma=gamma)
+        def run():
+            return first_episodes(runner, *args, gamma=gamma)
 
-    if not seed_by_seed:
-        return jax.jit(jax.vmap(episodes, in_axes=SEED_AXES + (None,)), static_argnums=(11,))
+        if not seed_by_seed:
+            return run()
 
-    def one_after_another(*args):
-        *inputs, num_envs = args
+        def skipped():  # nothing due: zeros (a skipped seed's result is meaningless)
+            return jax.tree.map(lambda r: jnp.zeros(r.shape, r.dtype), jax.eval_shape(run))
 
-        def one(per_seed):
-            values = iter(per_seed)
-            full = [next(values) if axis == 0 else x for x, axis in zip(inputs, SEED_AXES)]
+        return jax.lax.cond(args[SKIP], skipped, run)
 
-            def run():
-                return episodes(*full, num_envs)
-
-            def skipped():  # nothing due: zeros (a skipped seed's result is meaningless)
-                return jax.tree.map(lambda r: jnp.zeros(r.shape, r.dtype), jax.eval_shape(run))
-
-            return jax.lax.cond(full[SKIP], skipped, run)
-
-        return jax.lax.map(one, [x for x, axis in zip(inputs, SEED_AXES) if axis == 0])
-
-    return jax.jit(one_after_another, static_argnums=(11,))
+    return jax.jit(over_seeds(episodes, seed_by_seed, SEED_AXES + (None,)),
+                   static_argnums=(11,))

@@ -17,7 +17,7 @@ import numpy as np
 
 from smjax.agents.option_batch import joint_batch, options_update
 from smjax.agents.smdp import carry_pending
-from smjax.core.env import select_tree
+from smjax.core.env import over_seeds, select_tree
 from smjax.options.bank import frozen_temperature
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
@@ -26,7 +26,7 @@ from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner,
 from smjax.train.ahead import CompileAhead, resolve, signature
 from smjax.train.config import TrainConfig
 from smjax.train.program_cache import compile_program
-from smjax.train.seed_arrays import finite_flag, over_seeds
+from smjax.train.seed_arrays import finite_flag
 
 
 def _same(x):

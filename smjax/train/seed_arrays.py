@@ -72,11 +72,3 @@ def final_evaluation_keys(keys: jax.Array) -> jax.Array:
     figure."""
     return split_seeds(local(keys), 2)[1]
 
-
-def over_seeds(fn, one_after_another: bool):
-    """``fn`` of one seed, over arguments with a leading seed axis: side by side
-    (``vmap``), or one seed after another (``lax.map``), where each seed's ``lax.cond``
-    branches for that seed alone and its loops end with its own work."""
-    if not one_after_another:
-        return jax.vmap(fn)
-    return lambda *args: jax.lax.map(lambda per_seed: fn(*per_seed), args)
