@@ -9,13 +9,14 @@ its own learner), and times, as compiled, seed-vmapped programs on the same inpu
   ``update`` over its rows, mapped over the options with ``OPTION_AXES``: the update
   before ``update_options`` existed), ``each_option`` (the fallback of an agent without
   ``update_options``) and ``grouped`` (the agent's ``update_options``, ``option_update``
-  "grouped"); the learners are donated and come back whole, as in the trainer's chunk
+  "grouped", at each ``--per-step``: blocks per pass of its loop); the learners are donated and come back whole, as in the trainer's chunk
   (a DQN buffer is then written in place);
 * ``chunk``: ``Engine.joint_chunk`` as the trainer calls it (rollouts + updates), for an
   agent without ``update_options`` and with it.
 
 ``--algo`` picks the learner (ppo, actor-critic, dqn), ``--agent KEY=JSON`` sets a field
-of its config.
+of its config. ``--per-step 1 16`` times the grouped update (and chunk) at 1 and at 16
+blocks per pass of its loop (``option_blocks_per_step``).
 
 The variants alternate within every repeat, so a noisy (shared) machine hits each alike;
 medians are printed, with the ratio to the first variant.
@@ -80,9 +81,10 @@ def record_rollout(engine, state, learned):
     return jax.jit(jax.vmap(one))(state, learned)
 
 
-def update_variants(engine, plain_agent):
-    """The joint updates (grouped: where the agent has one), each ``(learners [O],
-    pending [O, B], traj, key) -> learners``."""
+def update_variants(engine, plain_agent, grouped_engines):
+    """The joint updates (grouped: where the agent has one, named by its blocks per pass
+    from ``grouped_engines``), each ``(learners [O], pending [O, B], traj, key) ->
+    learners``."""
     from smjax.agents.option_batch import each_option, joint_batch
     from smjax.agents.smdp import carry_pending
     from smjax.options.joint import OPTION_AXES
@@ -102,8 +104,9 @@ def update_variants(engine, plain_agent):
         return run
 
     variants = {"vmap": vmapped, "each_option": batched(each_option(plain_agent.update))}
-    if engine.agent.update_options is not None:
-        variants["grouped"] = batched(engine.agent.update_options)
+    for name, eng in grouped_engines.items():
+        if eng.agent.update_options is not None:
+            variants[name] = batched(eng.agent.update_options)
     return variants
 
 
@@ -134,6 +137,8 @@ def main(argv=None) -> None:
                     help="option_block of PPO or the actor-critic (default: its own)")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--skip-chunk", action="store_true")
+    ap.add_argument("--per-step", type=int, nargs="+", default=[0], metavar="K",
+                    help="blocks per pass of the grouped loop to time (0: the backend's)")
     args = ap.parse_args(argv)
     agent_cfg = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.agent)}
     if args.block is not None:
@@ -141,6 +146,9 @@ def main(argv=None) -> None:
     if args.algo != "dqn":  # the grouped update, whatever "auto" picks on this backend
         agent_cfg["option_update"] = "grouped"
     engine, plain = build(args, agent_cfg)
+    grouped_engines = {
+        ("grouped" if k == 0 else f"grouped_{k}"): build(
+            args, dict(agent_cfg, option_blocks_per_step=k))[0] for k in args.per_step}
     S, O = args.seeds, engine.h.num_options
     state = joint_state(engine, S)
     learned = jnp.ones((S, O), bool)
@@ -151,7 +159,7 @@ def main(argv=None) -> None:
     key = jax.random.split(jax.random.PRNGKey(5), S)
     # the learners donated, as the trainer's chunk does (a DQN buffer is written in place)
     progs = {name: jax.jit(jax.vmap(fn), donate_argnums=0)
-             for name, fn in update_variants(engine, plain).items()}
+             for name, fn in update_variants(engine, plain, grouped_engines).items()}
     chunks = {}
     if not args.skip_chunk:
         from smjax.train.engine import Engine
@@ -162,7 +170,8 @@ def main(argv=None) -> None:
         rest = (jnp.ones((S,), bool), learned, jnp.zeros((S,), jnp.float32),
                 jnp.full((S, O), 0.99, jnp.float32), windows,
                 jnp.tile(jnp.asarray([256, 256], jnp.int32), (S, 1)))
-        chunks = {"chunk_each_option": (old, rest), "chunk_grouped": (engine, rest)}
+        chunks = {"chunk_each_option": (old, rest)}
+        chunks.update({f"chunk_{name}": (eng, rest) for name, eng in grouped_engines.items()})
     out: dict = {}
     for _ in range(args.repeats + 1):  # the first round compiles
         for name, prog in progs.items():

@@ -54,13 +54,14 @@ CONFIGS = {
 }
 
 
-@pytest.mark.parametrize("block", [1, 4, 128])
+@pytest.mark.parametrize("block,per_step", [(1, 1), (4, 1), (128, 1), (4, 8)])
 @pytest.mark.parametrize("name", list(CONFIGS))
-def test_the_grouped_update_equals_each_options_update(name, block):
+def test_the_grouped_update_equals_each_options_update(name, block, per_step):
     # the same parameters, optimiser states (Adam's first moment is the gradient scaled:
     # the gradients agree), counters and metrics as update() option by option, whatever
     # the block size (one row, blocks that split an option's decisions, one for them all)
-    agent = _agent(option_block=block, **CONFIGS[name])
+    # and however many blocks a pass of the loop takes
+    agent = _agent(option_block=block, option_blocks_per_step=per_step, **CONFIGS[name])
     batch, _ = joint_batch(_pending(block), _record(block))
     states, key = _states(agent, block), jax.random.PRNGKey(3)
     grouped, g_metrics = jax.jit(agent.update_options)(states, batch, key)
@@ -150,8 +151,10 @@ def test_the_grouped_dqn_update_equals_each_options_update(config):
 def test_the_grouped_update_is_chosen_by_backend_unless_named(algo):
     assert _agent(algo).update_options is not None
     assert make_agent(algo, option_update="per_option").update_options is None
-    # auto: grouped on a CPU (the tests' backend), per option on an accelerator
-    assert (make_agent(algo).update_options is not None) == (jax.default_backend() == "cpu")
+    # auto: the actor-critic's grouped on every backend; DQN's on a CPU (the tests'
+    # backend), per option on an accelerator
+    grouped_here = algo == "actor-critic" or jax.default_backend() == "cpu"
+    assert (make_agent(algo).update_options is not None) == grouped_here
     with pytest.raises(ValueError, match="option_update"):
         make_agent(algo, option_update="sometimes")
 

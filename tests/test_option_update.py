@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from smjax.agents import make_agent
-from smjax.agents.grouped import grouped_grads
+from smjax.agents.grouped import blocks_per_step, grouped_grads
 from smjax.agents.option_batch import each_option, joint_batch
 from smjax.agents.smdp import carry_pending
 from smjax.core.transition import Transition
@@ -45,14 +45,14 @@ def test_the_batch_carries_pending_rows_as_each_option_did():
     assert_trees_close(new_pending, want_pending, rtol=0, atol=0)
 
 
-@pytest.mark.parametrize("block", [1, 3, 128])
+@pytest.mark.parametrize("block,per_step", [(1, 1), (3, 1), (128, 1), (3, 4), (1, 16)])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_the_grouped_update_equals_each_options_update(block, seed):
+def test_the_grouped_update_equals_each_options_update(block, per_step, seed):
     # same parameters, optimiser states, counters and metrics as update() option by
     # option, whatever the block size (one row, blocks that split an option's decisions,
-    # one block holding them all)
+    # one block holding them all) and however many blocks a pass of the loop takes
     agent = make_agent("ppo", hidden_sizes=(16, 16), num_minibatches=3, update_epochs=2,
-                       option_block=block, target_kl=0.05)
+                       option_block=block, option_blocks_per_step=per_step, target_kl=0.05)
     batch, _ = joint_batch(_pending(seed), _record(seed))
     states, key = _states(agent, seed), jax.random.PRNGKey(seed + 7)
     grouped, g_metrics = jax.jit(agent.update_options)(states, batch, key)
@@ -97,9 +97,9 @@ def test_grouped_gradients_are_each_options_own():
                                   (jnp.arange(11) < counts[o]).astype(jnp.float32))
             for o in range(O)]
     want = jax.tree.map(lambda *g: jnp.stack(g), *want)
-    for block in (1, 4, 16):
-        grads, sums = jax.jit(lambda p, c, b=block: grouped_grads(block_loss, p, c, b))(
-            params, counts)
+    for block, per_step in ((1, 1), (4, 1), (16, 1), (1, 3), (4, 8)):
+        grads, sums = jax.jit(lambda p, c, b=block, k=per_step: grouped_grads(
+            block_loss, p, c, b, k))(params, counts)
         assert_trees_close(grads, want, rtol=1e-5, atol=1e-6)
         np.testing.assert_array_equal(np.asarray(sums["rows"]), np.asarray(counts))
     assert not np.asarray(grads["w"][2]).any()
@@ -108,7 +108,12 @@ def test_grouped_gradients_are_each_options_own():
 def test_the_grouped_update_is_chosen_by_backend_unless_named():
     assert make_agent("ppo", option_update="grouped").update_options is not None
     assert make_agent("ppo", option_update="per_option").update_options is None
-    # auto: grouped on a CPU (the tests' backend), per option on an accelerator
-    assert (make_agent("ppo").update_options is not None) == (jax.default_backend() == "cpu")
+    assert make_agent("ppo").update_options is not None  # auto: grouped on every backend
     with pytest.raises(ValueError, match="option_update"):
         make_agent("ppo", option_update="sometimes")
+    with pytest.raises(ValueError, match="option_blocks_per_step"):
+        make_agent("ppo", option_blocks_per_step=-1)
+    # blocks per pass: one on a CPU; on an accelerator those a minibatch's expected rows
+    # fill, one partly filled block per option; or as named
+    assert blocks_per_step(3, 1024, 128, 5) == 3
+    assert blocks_per_step(0, 1024, 128, 5) == (1 if jax.default_backend() == "cpu" else 13)

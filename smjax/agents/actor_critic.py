@@ -63,9 +63,10 @@ class ActorCriticConfig:
     # how joint fine-tuning updates its learners, as PPOConfig's option_update: "grouped"
     # (every option's one step on its own decisions, ``actor_critic_options``, in blocks
     # of option_block rows), "per_option" (each option's update over every row, vmapped)
-    # or "auto" (benchmarks/RESULTS.md, "The cost of a joint update")
+    # or "auto" (grouped; benchmarks/RESULTS.md, "The cost of a joint update")
     option_update: str = static("auto")
     option_block: int = static(128)
+    option_blocks_per_step: int = static(0)  # as PPOConfig's
 
     def __post_init__(self):
         checks.check_range(self, "learning_rate", 0.0, 1.0, low_open=True)
@@ -80,6 +81,7 @@ class ActorCriticConfig:
         checks.check_range(self, "max_grad_norm", 0.0)
         checks.check_choice(self, "option_update", ("auto", "grouped", "per_option"))
         checks.check_positive_int(self, "option_block")
+        checks.check_non_negative_int(self, "option_blocks_per_step")
 
 
 
@@ -118,8 +120,7 @@ def make_agent(config: ActorCriticConfig | None = None, layout=()) -> Agent:
         seen = jnp.asarray(np.iinfo(np.int32).max // 2, jnp.int32)
         return state.replace(params=params, episodes_seen=seen)
 
-    grouped = config.option_update == "grouped" or (
-        config.option_update == "auto" and jax.default_backend() == "cpu")
+    grouped = config.option_update != "per_option"
     return Agent("actor-critic", init, act, update, policy_logits, "sample", warm_start,
                  update_options=make_update_options(
                      config, network_for, optimizer, config.option_block) if grouped else None)

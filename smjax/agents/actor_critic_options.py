@@ -19,7 +19,7 @@ import jax.numpy as jnp
 
 from smjax.agents.actor_critic_update import (decision_data, finish, gradient_step,
                                               reinforce_terms)
-from smjax.agents.grouped import grouped_grads, grouped_sums
+from smjax.agents.grouped import blocks_per_step, grouped_grads, grouped_sums
 from smjax.agents.networks import flatten_obs, masked_mean
 from smjax.agents.option_batch import OptionBatch
 from smjax.agents.ppo_update import weighted_sum
@@ -32,6 +32,7 @@ def make_update_options(config, network_for, optimizer, block: int):
     def update_options(states, batch: OptionBatch, key: jax.Array):
         del key  # the update is deterministic given the rollout
         O, T, B = batch.traj.decision.shape
+        per_step = blocks_per_step(config.option_blocks_per_step, T * B, block, O)
         returns, decision, episodes = jax.vmap(lambda tr: decision_data(config, tr))(batch.traj)
         flat = lambda x: x.reshape((O, T * B) + x.shape[3:])  # noqa: E731
         counts = flat(decision).sum(1).astype(jnp.int32)
@@ -51,8 +52,8 @@ def make_update_options(config, network_for, optimizer, block: int):
 
         stats = None
         if config.normalize_advantages:
-            stats = advantage_stats(rows_of, states.params, counts, block, batch.traj.value,
-                                    returns, decision)
+            stats = advantage_stats(rows_of, states.params, counts, (block, per_step),
+                                    batch.traj.value, returns, decision)
 
         def block_loss(own, o, j, valid):
             hp = jax.tree.map(lambda x: x[o], states.hp)
@@ -60,7 +61,7 @@ def make_update_options(config, network_for, optimizer, block: int):
             return reinforce_terms(config, *rows_of(own, o, j, valid), hp, mean=weighted_sum,
                                    advantage_stats=picked)
 
-        grads, sums = grouped_grads(block_loss, states.params, counts, block)
+        grads, sums = grouped_grads(block_loss, states.params, counts, block, per_step)
         total = sums.pop("loss")
 
         def one_option(state, grads, episodes, decision, returns, total, aux):
@@ -74,7 +75,7 @@ def make_update_options(config, network_for, optimizer, block: int):
     return update_options
 
 
-def advantage_stats(rows_of, params, counts, block, value, returns, decision):
+def advantage_stats(rows_of, params, counts, blocks, value, returns, decision):
     """The mean and standard deviation ([O] each) of every option's advantages
     ``return - V(s)`` over its decisions. The spread is summed around a shift close to
     the mean (the advantages by the values the rollout recorded), so that the difference
@@ -87,6 +88,6 @@ def advantage_stats(rows_of, params, counts, block, value, returns, decision):
         return {"mean": weighted_sum(centred, weight),
                 "square": weighted_sum(jnp.square(centred), weight)}
 
-    sums = grouped_sums(block_values, params, counts, block)
+    sums = grouped_sums(block_values, params, counts, *blocks)
     variance = jnp.maximum(sums["square"] - jnp.square(sums["mean"]), 0.0)
     return shift + sums["mean"], jnp.sqrt(variance)

@@ -3,12 +3,17 @@
 A learner per option (parameters stacked on a leading axis O) trains on its own rows of
 a batch. Running every option's network over every row and masking the others' out
 costs rows x options; here each option's rows are cut into blocks of ``block`` rows
-(the last one padded), and a loop runs one block at a time through its own option's
-parameters, adding the block's gradient to that option's. The loop runs as many times
-as there are blocks, a traced count, so the work follows the rows there are (plus at
-most one padded block per option), not a static worst case. Under ``vmap`` (seeds) the
-loop runs as often as the seed with the most blocks needs. ``grouped_sums`` is the same
-loop for values that need no gradient (a forward pass over the rows).
+(the last one padded), and a loop runs the blocks through their own option's
+parameters, adding each block's gradient to that option's. The loop runs until the
+blocks there are (a traced count) are done, so the work follows the rows there are
+(plus at most one padded block per option), not a static worst case. Under ``vmap``
+(seeds) the loop runs as often as the seed with the most blocks needs.
+``grouped_sums`` is the same loop for values that need no gradient (a forward pass over
+the rows).
+
+A pass of the loop takes one block on a CPU and several at once on an accelerator
+(``blocks_per_step``): a CPU pays for the work, an accelerator for each pass's kernel
+launches (benchmarks/RESULTS.md, "The cost of a joint update").
 
 Why blocks and not ``jax.lax.ragged_dot``: on XLA:CPU a ragged product over 5 groups
 takes longer than the dense product of every row with every group's weights.
@@ -21,13 +26,24 @@ import jax
 import jax.numpy as jnp
 
 
+def blocks_per_step(requested: int, expected_rows: int, block: int, num_options: int) -> int:
+    """Blocks per pass of the loop: ``requested``, or for 0 one on a CPU and, on an
+    accelerator, as many as ``expected_rows`` (the rows a call usually has) fill with
+    one partly filled block per option, so one pass usually does it all."""
+    if requested:
+        return requested
+    if jax.default_backend() == "cpu":
+        return 1
+    return -(-expected_rows // block) + num_options
+
+
 def block_count(counts: jax.Array, block: int) -> jax.Array:
     """int [O]: the blocks each option's ``counts`` rows fill."""
     return (counts + block - 1) // block
 
 
 def grouped_grads(block_loss: Callable, params: Any, counts: jax.Array,
-                  block: int) -> tuple[Any, dict]:
+                  block: int, per_step: int = 1) -> tuple[Any, dict]:
     """Every option's gradient and summed auxiliary values over its own rows.
 
     ``params``: stacked per option (leading axis O); ``counts`` int [O]: option o's rows
@@ -35,15 +51,13 @@ def grouped_grads(block_loss: Callable, params: Any, counts: jax.Array,
     (loss, aux)`` is option o's loss on ``rows`` (int [block]; ``valid``: bool [block],
     False past its count), a part of a sum over its blocks (padding rows must add
     nothing); ``aux`` is a dict of scalars. Returns the grads (stacked like ``params``)
-    and the sum per option ([O]) of the loss (``"loss"``) and of each aux value."""
+    and the sum per option ([O]) of the loss (``"loss"``) and of each aux value.
+    ``per_step`` blocks go through the loop at once (``_block_loop``)."""
     grad_fn = jax.value_and_grad(block_loss, has_aux=True)
 
-    def add_block(acc, own, o, j, valid, mine):
-        grads, sums = acc
+    def one_block(own, o, j, valid):
         (loss, aux), g = grad_fn(own, o, j, valid)
-        grads = jax.tree.map(lambda a, x: a + _spread(mine, x), grads, g)
-        sums = jax.tree.map(lambda a, x: a + _spread(mine, x), sums, dict(aux, loss=loss))
-        return grads, sums
+        return g, dict(aux, loss=loss)
 
     def loss_and_aux(own, o, j, valid):
         loss, aux = block_loss(own, o, j, valid)
@@ -51,19 +65,16 @@ def grouped_grads(block_loss: Callable, params: Any, counts: jax.Array,
 
     zeros = jax.tree.map(jnp.zeros_like, params)
     init = (zeros, _zero_sums(loss_and_aux, params, counts, block))
-    return _block_loop(add_block, params, counts, block, init)
+    return _block_loop(one_block, params, counts, block, init, per_step)
 
 
-def grouped_sums(block_values: Callable, params: Any, counts: jax.Array, block: int) -> dict:
+def grouped_sums(block_values: Callable, params: Any, counts: jax.Array, block: int,
+                 per_step: int = 1) -> dict:
     """Every option's sums of ``block_values(option_params, o, rows, valid) -> dict of
     scalars`` over its own rows (as ``grouped_grads``, without a gradient): a pass that
     only reads the networks, at the price of a forward pass over the rows there are."""
-    def add_block(sums, own, o, j, valid, mine):
-        values = block_values(own, o, j, valid)
-        return jax.tree.map(lambda a, x: a + _spread(mine, x), sums, values)
-
     init = _zero_sums(block_values, params, counts, block)
-    return _block_loop(add_block, params, counts, block, init)
+    return _block_loop(block_values, params, counts, block, init, per_step)
 
 
 def _zero_sums(block_values: Callable, params: Any, counts: jax.Array, block: int) -> dict:
@@ -74,21 +85,40 @@ def _zero_sums(block_values: Callable, params: Any, counts: jax.Array, block: in
     return jax.tree.map(lambda x: jnp.zeros((counts.shape[0],), x.dtype), values)
 
 
-def _block_loop(add_block: Callable, params: Any, counts: jax.Array, block: int, init):
-    """``add_block(acc, option_params, o, rows, valid, one_hot_o) -> acc`` over every
-    block of every option's rows, one block at a time, from ``init``."""
+def _block_loop(one_block: Callable, params: Any, counts: jax.Array, block: int, init,
+                per_step: int):
+    """The sum, into ``init`` at each block's option, of ``one_block(option_params, o,
+    rows, valid)`` over every block of every option's rows, ``per_step`` blocks per pass
+    of the loop. One at a time suits a CPU (no work past the last block); several at
+    once (vmapped, one batched kernel per layer) suit an accelerator, where a pass's
+    launches cost more than the at most ``per_step - 1`` empty blocks of the last one."""
     num_options = counts.shape[0]
     blocks = block_count(counts, block)
     ends = jnp.cumsum(blocks)
     rows = jnp.arange(block, dtype=counts.dtype)
 
+    def locate(i):
+        """Block i's option, rows, valid rows and (one-hot) where its sums go."""
+        o = jnp.minimum(jnp.sum(ends <= i), num_options - 1).astype(jnp.int32)
+        j = (i - (ends[o] - blocks[o])) * block + rows
+        hot = jnp.arange(num_options) == o
+        inside = i < ends[-1]  # a pass's blocks past the last one add nothing
+        return o, j, (j < counts[o]) & inside, hot, hot & inside
+
+    def one(i):
+        o, j, valid, hot, mine = locate(i)
+        own = jax.tree.map(lambda x: _pick(hot, x), params)
+        return one_block(own, o, j, valid), mine
+
     def body(carry):
         i, acc = carry
-        o = jnp.sum(ends <= i).astype(jnp.int32)  # the option whose blocks cover block i
-        j = (i - (ends[o] - blocks[o])) * block + rows
-        mine = jnp.arange(num_options) == o
-        own = jax.tree.map(lambda x: _pick(mine, x), params)
-        return i + 1, add_block(acc, own, o, j, j < counts[o], mine)
+        if per_step == 1:
+            new, mine = one(i)
+            acc = jax.tree.map(lambda a, x: a + _spread(mine, x), acc, new)
+        else:
+            new, mine = jax.vmap(one)(i + jnp.arange(per_step, dtype=i.dtype))
+            acc = jax.tree.map(lambda a, x: a + _spread_many(mine, x), acc, new)
+        return i + per_step, acc
 
     init = (jnp.zeros((), counts.dtype), init)
     return jax.lax.while_loop(lambda c: c[0] < ends[-1], body, init)[1]
@@ -105,3 +135,8 @@ def _pick(mine: jax.Array, stacked: jax.Array) -> jax.Array:
 def _spread(mine: jax.Array, x: jax.Array) -> jax.Array:
     """``x`` at option o of a stacked ``[O, ...]`` zero, for the one-hot ``mine``."""
     return mine.astype(x.dtype).reshape((-1,) + (1,) * x.ndim) * x
+
+
+def _spread_many(mine: jax.Array, x: jax.Array) -> jax.Array:
+    """The sum of ``_spread(mine[k], x[k])`` over k (``mine`` [K, O], ``x`` [K, ...])."""
+    return jnp.tensordot(mine.astype(x.dtype), x, axes=([0], [0]))

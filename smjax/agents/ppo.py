@@ -86,11 +86,14 @@ class PPOConfig:
     # through its network in blocks of this many rows (``ppo_options``): the speed
     # changes, the result does not (up to the order of float sums)
     option_block: int = static(128)
+    # blocks per pass of that loop (0: one on a CPU, on an accelerator as many as a
+    # minibatch usually fills: ``smjax.agents.grouped.blocks_per_step``): the speed
+    # changes, the result does not
+    option_blocks_per_step: int = static(0)
     # how joint fine-tuning updates its learners: "grouped" (every option's own decisions
     # in one pass: the work follows the decisions), "per_option" (each option's update over
     # the whole batch, masked, vmapped over options: one wide kernel per layer), or "auto"
-    # (grouped on a CPU, where the work is the cost; per option on an accelerator, where
-    # the grouped update's loop of small blocks costs more launches than FLOPs saved)
+    # (grouped: the faster on a CPU and, its blocks batched, on a GPU)
     option_update: str = static("auto")
 
     def __post_init__(self):
@@ -105,6 +108,7 @@ class PPOConfig:
         checks.check_positive_int(self, "num_minibatches")
         checks.check_range(self, "target_kl", 0.0)
         checks.check_positive_int(self, "option_block")
+        checks.check_non_negative_int(self, "option_blocks_per_step")
         checks.check_choice(self, "option_update", ("auto", "grouped", "per_option"))
         checks.check_hidden_sizes(self)
         checks.check_non_negative_int(self, "recurrent_size")
@@ -267,8 +271,7 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
     if memory:
         return Agent("ppo", init, act_recurrent, update, policy_logits_recurrent,
                      hidden_size=memory)
-    grouped = config.option_update == "grouped" or (
-        config.option_update == "auto" and jax.default_backend() == "cpu")
+    grouped = config.option_update != "per_option"
     return Agent("ppo", init, act, update, policy_logits,
                  update_options=make_update_options(config, network_for, optimizer,
                                                     config.option_block) if grouped else None)

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import optax
 
 from smjax.agents.base import scale_by_lr
-from smjax.agents.grouped import grouped_grads
+from smjax.agents.grouped import blocks_per_step, grouped_grads
 from smjax.agents.networks import flatten_obs
 from smjax.agents.option_batch import OptionBatch
 from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, finish, kl_stop,
@@ -28,7 +28,7 @@ def make_update_options(config, network_for, optimizer, block: int):
     from ``network_for``), with ``block`` rows per block of the gradient loop."""
     M = config.num_minibatches
 
-    def option_gradients(states, params, batch: OptionBatch, flat, order, counts, m):
+    def option_gradients(states, params, batch: OptionBatch, flat, order, counts, m, per_step):
         """Every option's gradient on its minibatch ``m`` (``counts`` [O] decisions)."""
         rows = batch.traj.obs.reshape(order.shape)
         network = network_for(flat[1].shape[-1])
@@ -42,7 +42,7 @@ def make_update_options(config, network_for, optimizer, block: int):
             logits, value = network.apply(own, obs)
             return loss_terms(config, logits, value, picked + (weight,), hp, mean=weighted_sum)
 
-        return grouped_grads(block_loss, params, counts, block)
+        return grouped_grads(block_loss, params, counts, block, per_step)
 
     def step(grads, opt_state, params, hp):
         updates, opt_state = optimizer.update(grads, opt_state, params)
@@ -51,6 +51,8 @@ def make_update_options(config, network_for, optimizer, block: int):
 
     def update_options(states, batch: OptionBatch, key: jax.Array):
         O, T, B = batch.traj.decision.shape
+        # a minibatch's rows where each tick holds one decision
+        per_step = blocks_per_step(config.option_blocks_per_step, T * B // M, block, O)
         data, episodes = jax.vmap(lambda tr, hp: decision_data(config, tr, hp))(
             batch.traj, states.hp)
         flat = tuple(x.reshape((O, T * B) + x.shape[3:]) for x in data)
@@ -59,7 +61,8 @@ def make_update_options(config, network_for, optimizer, block: int):
         def minibatch_step(carry, m, order):
             params, opt_state, grad_steps, stopped = carry
             counts = jnp.maximum((decisions - m + M - 1) // M, 0)
-            grads, sums = option_gradients(states, params, batch, flat, order, counts, m)
+            grads, sums = option_gradients(states, params, batch, flat, order, counts, m,
+                                           per_step)
             new = jax.vmap(step)(grads, opt_state, params, states.hp)
             has_decision = counts > 0
             stopped = kl_stop(stopped, has_decision, sums["approx_kl"], states.hp)
