@@ -133,6 +133,19 @@ def _chunk(engine, state, active, one_after_another):
                  jnp.zeros((S, engine.h.num_options), bool), tick)
 
 
+def test_fresh_learners_are_each_seeds_own_init_in_one_program():
+    """Every seed's fresh learner is ``agent.init`` of its own key (bit for bit on one CPU),
+    whatever seeds are initialised beside it."""
+    engine, state = _engine(TrainConfig(num_envs=8, rollout_ticks=8, updates_per_chunk=1))
+    keys = jax.random.split(jax.random.PRNGKey(0), 3)
+    one = jax.jit(lambda k: engine.agent.init(k, engine.example_obs, engine.num_actions))
+    for s in range(3):
+        jax.tree.map(lambda a, b: np.testing.assert_array_equal(a[s], b),
+                     state.learner, one(keys[s]))
+    two = engine.init_learner(keys[1:])
+    jax.tree.map(lambda a, b: np.testing.assert_array_equal(a[1:], b), state.learner, two)
+
+
 def test_a_chunk_seed_by_seed_trains_as_side_by_side_and_leaves_idle_seeds_alone():
     """On one CPU a chunk runs its seeds one after another: each seed learns what it learns
     side by side (to float tolerance), an idle seed keeps its state and counts nothing, and

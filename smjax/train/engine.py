@@ -93,9 +93,8 @@ class Engine:
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
         self.program_identity: dict | None = None
-        self._init_one = jax.jit(lambda k: agent.init(k, self.example_obs, self.num_actions))
+        self._init = jax.jit(seeds(lambda k: agent.init(k, self.example_obs, self.num_actions)))
         # host-side array plumbing as one program each, not one tiny program per leaf
-        self._stack = jax.jit(lambda states: jax.tree.map(lambda *xs: jnp.stack(xs), *states))
         self._per_option = jax.jit(self._copies_per_option)
         self._warm = jax.jit(jax.vmap(agent.warm_start))
         self._warm_joint = jax.jit(lambda learners, bank: jax.vmap(jax.vmap(agent.warm_start))(
@@ -126,11 +125,12 @@ class Engine:
 
     # ---- state -----------------------------------------------------------------
     def init_learner(self, keys: jax.Array):
-        """Fresh learner states for each seed (leading axis S), initialised one seed at a
-        time and stacked (once per level, so cheap): XLA:CPU (jaxlib 0.10) can deadlock in
-        ``jit(vmap(init))`` of these networks without the scheduler flag that
-        ``smjax/__init__.py`` sets, and a user may opt out of that flag."""
-        return self._stack([self._init_one(k) for k in keys])
+        """Fresh learner states for each seed (leading axis S), in one program: on one CPU
+        device the seeds one after another (the numbers of one init per seed; XLA:CPU
+        (jaxlib 0.10) can deadlock in ``jit(vmap(init))`` of these networks without the
+        scheduler flag that ``smjax/__init__.py`` sets, and a user may opt out of it), side
+        by side elsewhere (one init per seed from a host loop cost a 100-seed GPU run ~30 s)."""
+        return self._init(keys)
 
     def warm_start(self, states, params):
         """Learner states (leading axis S) that continue from trained ``params``."""
