@@ -85,8 +85,8 @@ def test_results_keep_the_contract(far_teleport_run):
             if a["template"] == "give_key" and (a["running_success"] or 0) < 0.95:
                 assert b["template"] == "open_door"
     assert res["eval_policy"] == "sample"
-    assert set(res["final_success_by_policy"]) == {"greedy", "sample", "sample_t0.5", "options_t0.5"}
-    assert res["final_success_by_policy"]["sample"] == res["final_success"]
+    # the run's own mode alone unless eval_policies says "all"
+    assert res["final_success_by_policy"] == {"sample": res["final_success"]}
 
 
 def test_finetune_off_and_bad_values():

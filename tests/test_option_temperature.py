@@ -32,15 +32,22 @@ def test_bad_option_temperatures_are_refused(value):
         TrainConfig(option_temperature=value)
 
 
+@pytest.mark.parametrize("value", ["greedy", "", None, 1, ["all"]])
+def test_bad_eval_policies_are_refused(value):
+    with pytest.raises(ConfigError, match="eval_policies"):
+        TrainConfig(eval_policies=value)
+
+
 def test_a_run_samples_its_templates_at_the_option_temperature():
     cfg = TrainConfig(num_envs=8, rollout_ticks=8, updates_per_chunk=2, success_window=32,
                       gate_envs=16, eval_envs=16, max_episodes_per_level=150,
                       finetune_max_episodes=160, finetune_turn_episodes=80,
-                      option_temperature=0.5)
+                      option_temperature=0.5, eval_policies="all")
     res = run(make_keydoor(), cfg, [0], progress=False)
     assert 0.0 <= res["final_success"][0] <= 1.0
     # "sample" (the run's mode) now is the root at 1 and give_key at 0.5, as options_t0.5
     by_policy = res["final_success_by_policy"]
+    assert set(by_policy) == set(EVAL_TEMPERATURES)  # every mode, as eval_policies asks
     assert by_policy["sample"] == by_policy["options_t0.5"] == res["final_success"]
 
 

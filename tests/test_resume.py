@@ -207,3 +207,21 @@ def test_an_error_writing_results_loses_no_training(tmp_path, monkeypatch, faili
     res = run(make_keydoor(), cfg, [0], out, progress=False, resume=True)
     saved = json.loads((out / "results.json").read_text())
     assert saved["levels"] == res["levels"] and saved["final_success"] == res["final_success"]
+
+
+def test_a_trained_run_resumed_with_every_evaluation_mode(tmp_path):
+    """The final evaluation runs the run's own mode; resuming the trained run with
+    ``eval_policies`` "all" evaluates every mode without training again."""
+    from smjax.options.episodes import EVAL_TEMPERATURES
+
+    cfg = TrainConfig(method="flat", num_envs=16, rollout_ticks=8, updates_per_chunk=2,
+                      max_episodes_per_level=60, success_window=16, eval_envs=16,
+                      checkpoint_every=0.0)
+    out = tmp_path / "run"
+    first = run(make_keydoor(), cfg, [0], out, progress=False)
+    assert list(first["final_success_by_policy"]) == ["sample"]
+    again = run(make_keydoor(), cfg.replace(eval_policies="all"), [0], out, progress=False,
+                resume=True)
+    assert set(again["final_success_by_policy"]) == set(EVAL_TEMPERATURES)
+    assert again["final_success"] == first["final_success"]
+    assert again["levels"] == first["levels"]

@@ -77,6 +77,8 @@ class TrainConfig:
       gate_interval: chunks between a seed's gate attempts.
       eval_envs: episodes (one per environment) that measure final_success.
       eval_max_ticks: cap on an evaluation episode.
+      eval_policies: "run": the final evaluation under the run's ``frozen_policy`` alone;
+        "all": also under every other mode (``final_success_by_policy``), 4x its time.
       tensorboard: also write TensorBoard event files to OUT/tensorboard.
       reset_pool: episode starts generated ahead of each rollout, per seed (None:
         ``num_envs``; 0: a fresh start per environment per tick, exact but slow where
@@ -136,6 +138,7 @@ class TrainConfig:
     gate_interval: int = 8
     eval_envs: int = 256
     eval_max_ticks: int = 2000
+    eval_policies: str = "run"
     reset_pool: int | None = None
     frozen_eval: str = "auto"
     policy_memory: str = "none"

@@ -56,6 +56,7 @@ def check_fields(cfg) -> None:
     need(cfg.finetune in FINETUNE_CHOICES, "finetune", f"one of {FINETUNE_CHOICES}")
     need(cfg.finetune_mode in FINETUNE_MODES, "finetune_mode", f"one of {FINETUNE_MODES}")
     need(cfg.frozen_policy in FROZEN_POLICIES, "frozen_policy", f"one of {FROZEN_POLICIES}")
+    need(cfg.eval_policies in ("run", "all"), "eval_policies", "one of ('run', 'all')")
     for name in ("tensorboard", "continue_episodes", "gate", "finetune_side_cost",
                  "finetune_continue_episodes"):
         need(isinstance(getattr(cfg, name), bool), name, "true or false")

@@ -308,15 +308,17 @@ class HierarchyTrainer:
 
     def evaluate(self, t_start: float) -> dict:
         """The trained hierarchies on fresh teleport-free episodes, under the run's frozen
-        policy (final_success) and every other mode; the run's raw results."""
+        policy (final_success) and, where ``eval_policies`` says "all", every other mode;
+        the run's raw results."""
         a, st = self.arrays, self.state
         # a saved policy keeps these keys (``eval_keys``), so evaluating it reproduces this
         eval_keys = k_eval = final_evaluation_keys(a.keys)
         if self.slots.mesh is not None:
             k_eval = dist.place(k_eval, seed_sharding(self.slots.mesh, k_eval))
-        by_policy = {}
-        for policy in [self.engine.frozen_policy] + [
-                p for p in EVAL_TEMPERATURES if p != self.engine.frozen_policy]:
+        by_policy, policies = {}, [self.engine.frozen_policy]
+        if self.cfg.evaluation.eval_policies == "all":
+            policies += [p for p in EVAL_TEMPERATURES if p not in policies]
+        for policy in policies:
             result, compile_s = self.engine.evaluate(
                 k_eval, a.bank, a.learned, place=self.slots.small, policy=policy)
             st.compile_seconds += compile_s

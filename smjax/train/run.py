@@ -53,8 +53,8 @@ def run_identity(task_name: str, cfg: TrainConfig, seeds: list[int], env_overrid
 
 
 # evaluation-only settings: a resume of a trained run (every stage done) may change them,
-# e.g. fewer ticks, where an evaluation with the saved ones cannot finish
-EVAL_SETTINGS = ("eval_envs", "eval_max_ticks")
+# e.g. fewer ticks, where an evaluation with the saved ones cannot finish, or every mode
+EVAL_SETTINGS = ("eval_envs", "eval_max_ticks", "eval_policies")
 
 
 def check_resumable(out_dir, identity: dict, step: str | None = None) -> bool:

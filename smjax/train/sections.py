@@ -33,7 +33,7 @@ SECTIONS: dict[str, dict[str, str]] = {
     "evaluation": {
         "gate": "gate", "gate_envs": "gate_envs", "gate_max_ticks": "gate_max_ticks",
         "gate_interval": "gate_interval", "eval_envs": "eval_envs",
-        "eval_max_ticks": "eval_max_ticks",
+        "eval_max_ticks": "eval_max_ticks", "eval_policies": "eval_policies",
     },
 }
 
@@ -117,6 +117,7 @@ class Evaluation:
     gate_interval: int
     eval_envs: int
     eval_max_ticks: int
+    eval_policies: str        # "run": the run's frozen policy alone; "all": every mode
 
     @classmethod
     def of(cls, cfg) -> "Evaluation":
