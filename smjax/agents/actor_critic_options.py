@@ -52,7 +52,7 @@ def make_update_options(config, network_for, optimizer, block: int):
 
         stats = None
         if config.normalize_advantages:
-            stats = advantage_stats(rows_of, states.params, counts, (block, per_step),
+            stats = advantage_stats(rows_of, states.params, counts, block, per_step,
                                     batch.traj.value, returns, decision)
 
         def block_loss(own, o, j, valid):
@@ -75,7 +75,7 @@ def make_update_options(config, network_for, optimizer, block: int):
     return update_options
 
 
-def advantage_stats(rows_of, params, counts, blocks, value, returns, decision):
+def advantage_stats(rows_of, params, counts, block, per_step, value, returns, decision):
     """The mean and standard deviation ([O] each) of every option's advantages
     ``return - V(s)`` over its decisions. The spread is summed around a shift close to
     the mean (the advantages by the values the rollout recorded), so that the difference
@@ -88,6 +88,6 @@ def advantage_stats(rows_of, params, counts, blocks, value, returns, decision):
         return {"mean": weighted_sum(centred, weight),
                 "square": weighted_sum(jnp.square(centred), weight)}
 
-    sums = grouped_sums(block_values, params, counts, *blocks)
+    sums = grouped_sums(block_values, params, counts, block, per_step)
     variance = jnp.maximum(sums["square"] - jnp.square(sums["mean"]), 0.0)
     return shift + sums["mean"], jnp.sqrt(variance)
