@@ -97,16 +97,17 @@ def _block_loop(one_block: Callable, params: Any, counts: jax.Array, block: int,
     ends = jnp.cumsum(blocks)
     rows = jnp.arange(block, dtype=counts.dtype)
 
-    def locate(i):
-        """Block i's option, rows, valid rows and (one-hot) where its sums go."""
-        o = jnp.minimum(jnp.sum(ends <= i), num_options - 1).astype(jnp.int32)
+    def one(i):
+        """Block i through its option's parameters, and (one-hot) where its sums go."""
+        o = jnp.sum(ends <= i).astype(jnp.int32)  # the option whose blocks cover block i
+        if per_step > 1:  # a pass's blocks past the last one: the last option's, adding nothing
+            o = jnp.minimum(o, num_options - 1)
         j = (i - (ends[o] - blocks[o])) * block + rows
         hot = jnp.arange(num_options) == o
-        inside = i < ends[-1]  # a pass's blocks past the last one add nothing
-        return o, j, (j < counts[o]) & inside, hot, hot & inside
-
-    def one(i):
-        o, j, valid, hot, mine = locate(i)
+        valid, mine = j < counts[o], hot
+        if per_step > 1:
+            inside = i < ends[-1]
+            valid, mine = valid & inside, hot & inside
         own = jax.tree.map(lambda x: _pick(hot, x), params)
         return one_block(own, o, j, valid), mine
 
