@@ -9,8 +9,9 @@ its own learner), and times, as compiled, seed-vmapped programs on the same inpu
   ``update`` over its rows, mapped over the options with ``OPTION_AXES``: the update
   before ``update_options`` existed), ``each_option`` (the fallback of an agent without
   ``update_options``) and ``grouped`` (the agent's ``update_options``, ``option_update``
-  "grouped", at each ``--per-step``: blocks per pass of its loop); the learners are donated and come back whole, as in the trainer's chunk
-  (a DQN buffer is then written in place);
+  "grouped", at each ``--per-step``: blocks per pass of its loop); the learners are
+  donated and come back whole, as in the trainer's chunk (a DQN buffer is then written
+  in place);
 * ``chunk``: ``Engine.joint_chunk`` as the trainer calls it (rollouts + updates), for an
   agent without ``update_options`` and with it.
 

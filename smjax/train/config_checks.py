@@ -16,6 +16,7 @@ from smjax.train.bounds import BoundsError, check_agent, checked_fields, short, 
 METHODS = ("top-down", "bottom-up", "flat")
 ALGOS = ("ppo", "dqn", "actor-critic")
 FROZEN_POLICIES = ("auto", "greedy", "sample")
+EVAL_POLICIES = ("run", "all")
 FINETUNE_CHOICES = ("auto", "on", "off")
 FINETUNE_MODES = ("turns", "joint")
 # what ``TrainConfig.levels`` may override per template
@@ -56,7 +57,7 @@ def check_fields(cfg) -> None:
     need(cfg.finetune in FINETUNE_CHOICES, "finetune", f"one of {FINETUNE_CHOICES}")
     need(cfg.finetune_mode in FINETUNE_MODES, "finetune_mode", f"one of {FINETUNE_MODES}")
     need(cfg.frozen_policy in FROZEN_POLICIES, "frozen_policy", f"one of {FROZEN_POLICIES}")
-    need(cfg.eval_policies in ("run", "all"), "eval_policies", "one of ('run', 'all')")
+    need(cfg.eval_policies in EVAL_POLICIES, "eval_policies", f"one of {EVAL_POLICIES}")
     for name in ("tensorboard", "continue_episodes", "gate", "finetune_side_cost",
                  "finetune_continue_episodes"):
         need(isinstance(getattr(cfg, name), bool), name, "true or false")

@@ -71,4 +71,3 @@ def final_evaluation_keys(keys: jax.Array) -> jax.Array:
     the end of training: a saved policy keeps them, so evaluating it reproduces that
     figure."""
     return split_seeds(local(keys), 2)[1]
-
