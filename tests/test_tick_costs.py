@@ -17,7 +17,9 @@ from smjax.agents import make_agent
 from smjax.options.runner import Controls, HierarchyRunner
 from smjax.train.config import TrainConfig
 from smjax.options.episodes import early_stop_bounds, seed_batched_episodes
+from smjax.train.ahead import CompileAhead
 from smjax.train.engine import ChunkControls, Engine, SeedState
+from smjax.train.episode_calls import EpisodeCalls
 from smjax.core.env import over_seeds
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -112,7 +114,7 @@ def test_seeds_one_after_another_give_each_seed_what_side_by_side_gives():
     results = {}
     for one_at_a_time in (False, True):
         engine.episodes = seed_batched_episodes(engine.runner, engine.gamma, one_at_a_time)
-        engine._compiled_episodes = {}
+        engine.episode_calls.compiled = {}
         for due in ([True] * 3, [False, True, False]):
             results[one_at_a_time, sum(due)], _ = engine.gate(
                 keys, state, bank, learned, [1] * 3, [0] * 3, due, [0.8] * 3)
@@ -167,6 +169,38 @@ def test_a_chunk_seed_by_seed_trains_as_side_by_side_and_leaves_idle_seeds_alone
                  (alone[0], alone[1]), (serial[0], serial[1]))
 
 
+def test_a_few_due_seeds_of_many_run_as_a_smaller_batch_with_their_own_numbers():
+    """Seeds side by side: a gate that concerns a few seeds of many runs them as a smaller
+    batch (compiled ahead with the whole one), and each gives the numbers the whole batch
+    gives it; more due seeds than the smaller batch holds run in the whole batch."""
+    cfg = TrainConfig(num_envs=8, gate_envs=16, gate_max_ticks=60)
+    engine, state = _engine(cfg)
+    engine.episodes = seed_batched_episodes(engine.runner, engine.gamma, False)
+    bank = engine.new_bank(state.learner)
+    learned = jnp.zeros((3, engine.h.num_options), bool).at[:, 0].set(True)
+    keys = jax.random.split(jax.random.PRNGKey(7), 3)
+    results, calls = {}, {}
+    for bucket in (3, 1):  # 3 seeds: a bucket of 3 never applies, one of 1 does
+        engine.episode_calls = calls[bucket] = EpisodeCalls(engine._compile_episodes, True, bucket)
+        ahead = CompileAhead(threads=1, enabled=True)
+        engine.episodes_ahead(engine.gate_args(keys, state, bank, learned, [1] * 3, [0] * 3,
+                                               [False] * 3, [0.8] * 3), cfg.gate_envs, ahead)
+        assert len(calls[bucket].compiled) == (2 if bucket == 1 else 1)
+        for due in ([False, True, False], [True, False, True]):
+            results[bucket, tuple(due)], _ = engine.gate(
+                keys, state, bank, learned, [1] * 3, [0] * 3, due, [0.8] * 3)
+    # the programs compiled ahead were the ones called: nothing compiled where it ran
+    assert len(calls[1].compiled) == 2 and len(calls[3].compiled) == 1
+    small, whole = results[1, (False, True, False)], results[3, (False, True, False)]
+    for name in whole:
+        np.testing.assert_allclose(np.asarray(small[name])[1], np.asarray(whole[name])[1],
+                                   rtol=1e-6)
+    assert (np.asarray(small["env_steps"]) > 0).tolist() == [False, True, False]
+    for name in whole:  # two due: the whole batch, the same program
+        np.testing.assert_array_equal(results[1, (True, False, True)][name],
+                                      results[3, (True, False, True)][name])
+
+
 def test_evaluation_and_gate_share_one_compiled_program():
     cfg = TrainConfig(num_envs=8, gate_envs=16, eval_envs=16, gate_max_ticks=50, eval_max_ticks=50)
     engine, state = _engine(cfg)
@@ -175,11 +209,11 @@ def test_evaluation_and_gate_share_one_compiled_program():
     keys = jax.random.split(jax.random.PRNGKey(5), 3)
     _, first = engine.gate(keys, state, bank, learned, [1] * 3, [0] * 3, [True] * 3, [0.8] * 3)
     result, second = engine.evaluate(keys, bank, learned, state.learner)
-    assert first > 0 and second == 0.0 and len(engine._compiled_episodes) == 1
+    assert first > 0 and second == 0.0 and len(engine.episode_calls.compiled) == 1
     assert np.asarray(result["completed"]).shape == (3,)
     # evaluation needs no learner state: the same program and the same numbers without one
     alone, third = engine.evaluate(keys, bank, learned)
-    assert third == 0.0 and len(engine._compiled_episodes) == 1
+    assert third == 0.0 and len(engine.episode_calls.compiled) == 1
     jax.tree.map(np.testing.assert_array_equal, alone, result)
 
 
@@ -269,7 +303,7 @@ def _root_calls_give_key_where(key_cells: tuple[int, ...]):
             give_key, jnp.zeros((2,), jnp.int32), jnp.asarray(True),
             engine._seed_temperatures("sample", 2), jnp.asarray(cfg.gate_max_ticks),
             jnp.zeros((2,), bool), early_stop_bounds([None] * 2))
-    result, _ = engine._run_episodes(args, cfg.gate_envs)
+    result, _ = engine.episode_calls(args, cfg.gate_envs)
     return {k: np.asarray(v) for k, v in result.items()}
 
 

@@ -23,8 +23,9 @@ from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
     EVAL_TEMPERATURES, early_stop_bounds, eval_temperatures, seed_batched_episodes)
 from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
-from smjax.train.ahead import CompileAhead, resolve, signature
+from smjax.train.ahead import CompileAhead
 from smjax.train.config import TrainConfig
+from smjax.train.episode_calls import EpisodeCalls
 from smjax.train.program_cache import compile_program
 from smjax.train.seed_arrays import finite_flag
 
@@ -89,7 +90,7 @@ class Engine:
         self.joint_chunk = jax.jit(seeds(self._joint_chunk), donate_argnums=(0,))
         # the gate's and the evaluation's episodes, one program
         self.episodes = seed_batched_episodes(self.runner, self.gamma, self.seed_by_seed)
-        self._compiled_episodes: dict[tuple, Any] = {}
+        self.episode_calls = EpisodeCalls(self._compile_episodes, not self.seed_by_seed)
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
         self.program_identity: dict | None = None
@@ -272,22 +273,10 @@ class Engine:
         return new, stats, metrics, new_windows, running, finite_flag(new.learner.params)
 
     # ---- gate and evaluation: one episode per environment, the first to finish ----------
-    def _run_episodes(self, args: tuple, num_envs: int) -> tuple[dict, float]:
-        """Call the (once compiled, per ``num_envs`` and argument layout) episodes program;
-        its result and the seconds this call spent compiling it or waiting for it."""
-        key = (num_envs, signature(args))
-        program, compile_s = resolve(self._compiled_episodes.get(key), args,
-                                     lambda xs: self._compile_episodes(xs, num_envs))
-        self._compiled_episodes[key] = program
-        return program(*args), compile_s
-
     def episodes_ahead(self, args: tuple, num_envs: int, ahead: CompileAhead) -> None:
         """Compile the episodes program for these arguments (``gate_args`` or
         ``evaluate_args``) on ``ahead``'s thread, unless it is compiled or under way."""
-        key = (num_envs, signature(args))
-        if key not in self._compiled_episodes and ahead.on:
-            self._compiled_episodes[key] = ahead.submit(
-                f"episodes-{num_envs}", lambda xs: self._compile_episodes(xs, num_envs), args)
+        self.episode_calls.ahead(args, num_envs, ahead)
 
     def _compile_episodes(self, args: tuple, num_envs: int):
         return self.compile(f"episodes-{num_envs}", self.episodes, args, static=(num_envs,))
@@ -300,7 +289,7 @@ class Engine:
 
     def evaluate(self, *args, **kwargs) -> tuple[dict, float]:
         """``evaluate_args``' episodes: their result and the seconds spent compiling."""
-        return self._run_episodes(self.evaluate_args(*args, **kwargs), self.cfg.evaluation.eval_envs)
+        return self.episode_calls(self.evaluate_args(*args, **kwargs), self.cfg.evaluation.eval_envs)
 
     def evaluate_args(self, keys, bank, learned, learner_state=None, place=_same, *,
                       policy: str | None = None, due: list[bool] | None = None,
@@ -330,7 +319,7 @@ class Engine:
 
     def gate(self, *args, **kwargs) -> tuple[dict, float]:
         """``gate_args``' episodes: their result and the seconds spent compiling."""
-        return self._run_episodes(self.gate_args(*args, **kwargs), self.cfg.evaluation.gate_envs)
+        return self.episode_calls(self.gate_args(*args, **kwargs), self.cfg.evaluation.gate_envs)
 
     def gate_args(self, keys, state: SeedState, bank, learned, learners: list[int],
                   starts: list[int], due: list[bool], thresholds: list[float],
