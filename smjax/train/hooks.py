@@ -11,6 +11,8 @@ per point). The hooks here: TensorBoard (``TensorBoardHook``) and checkpoints
 """
 from __future__ import annotations
 
+import importlib
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,7 +52,10 @@ class ResultsReport:
 
 
 class Hook:
-    """A side job of training; override what it needs."""
+    """A side job of training; override what it needs. ``modules``: what its later calls
+    import, imported on a thread once training starts (``import_ahead``)."""
+
+    modules: tuple[str, ...] = ()
 
     def start(self, trainer) -> None:
         """Training starts (or resumes) with ``trainer``'s state."""
@@ -67,6 +72,28 @@ class Hook:
         """The evaluated results are ready: once per run, once per point of a sweep (in
         ``sweep.json``'s order). Every process gets them, as it gets the chunks; a hook
         that writes files writes on process 0 (``smjax.train.distributed.is_writer``)."""
+
+
+def import_ahead(hooks) -> threading.Thread | None:
+    """Import the hooks' ``modules`` on a thread: a checkpoint's orbax and a plot's
+    matplotlib cost ~0.5 s of imports that would otherwise stop training where first
+    used, while the chunks leave the interpreter idle (XLA runs without the GIL). A module
+    that fails here is imported again, and fails, where it is used."""
+    names = [name for hook in hooks for name in getattr(hook, "modules", ())]
+    if not names:
+        return None
+
+    def load() -> None:
+        for name in names:
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001 - raised again where it is used
+                pass
+
+    # not a daemon: a process exiting mid-import would abort
+    thread = threading.Thread(target=load, name="smjax-import-ahead")
+    thread.start()
+    return thread
 
 
 class TensorBoardHook(Hook):
@@ -98,6 +125,7 @@ class CheckpointHook(Hook):
     last one (every stage done) is always written at once."""
 
     STAGE_GAP_WRITES = 20
+    modules = ("orbax.checkpoint",)
 
     def __init__(self, out_dir: str | Path, cfg: TrainConfig, run_meta: dict):
         self.out_dir, self.run_meta, self.every = out_dir, run_meta, cfg.run.checkpoint_every

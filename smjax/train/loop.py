@@ -34,7 +34,7 @@ from smjax.options.episodes import EVAL_TEMPERATURES
 from smjax.train.engine import Engine, SeedState
 from smjax.train.finetune import FinetuneStage
 from smjax.train.finetune_ops import check_finetune_agent, finetune_hp
-from smjax.train.hooks import CheckpointHook, ChunkReport, Hook, TensorBoardHook
+from smjax.train.hooks import CheckpointHook, ChunkReport, Hook, TensorBoardHook, import_ahead
 from smjax.train.levels import LevelStage, freeze_learners
 from smjax.train.plans import LevelPlan
 from smjax.train.progress import ProgressBar
@@ -150,6 +150,7 @@ class HierarchyTrainer:
                    [s for s in self.training() if not st.started[s]])
         for hook in self.hooks:
             hook.start(self)
+        import_ahead(self.hooks)
         try:
             return self.train_and_evaluate(t_start)
         finally:

@@ -210,6 +210,9 @@ class PlotHook(Hook):
     as ``smjax train`` draws it: ``run(..., hooks=[PlotHook()])``. It reads the files the
     built-in results hook wrote before it; process 0 draws."""
 
+    # most of matplotlib's import, without choosing a backend (``plot_curves`` picks Agg)
+    modules = ("matplotlib.figure", "matplotlib.backends.backend_agg")
+
     def results(self, trainer, report: ResultsReport) -> None:
         if report.out_dir is not None and dist.is_writer():
             plot_run(report.out_dir)
