@@ -144,12 +144,15 @@ def main(argv=None) -> None:
     agent_cfg = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.agent)}
     if args.block is not None:
         agent_cfg["option_block"] = args.block
-    if args.algo != "dqn":  # the grouped update, whatever "auto" picks on this backend
-        agent_cfg["option_update"] = "grouped"
-    engine, plain = build(args, agent_cfg)
-    grouped_engines = {
-        ("grouped" if k == 0 else f"grouped_{k}"): build(
-            args, dict(agent_cfg, option_blocks_per_step=k))[0] for k in args.per_step}
+    # the grouped update, whatever "auto" picks on this backend
+    grouped_cfg = dict(agent_cfg, option_update="grouped")
+    engine, plain = build(args, grouped_cfg if args.algo != "dqn" else agent_cfg)
+    if args.algo == "dqn":  # no loop over blocks: nothing per pass to vary
+        grouped_engines = {"grouped": build(args, grouped_cfg)[0]}
+    else:
+        grouped_engines = {
+            ("grouped" if k == 0 else f"grouped_{k}"): build(
+                args, dict(grouped_cfg, option_blocks_per_step=k))[0] for k in args.per_step}
     S, O = args.seeds, engine.h.num_options
     state = joint_state(engine, S)
     learned = jnp.ones((S, O), bool)

@@ -148,13 +148,10 @@ def test_the_grouped_dqn_update_equals_each_options_update(config):
 
 
 @pytest.mark.parametrize("algo", ["actor-critic", "dqn"])
-def test_the_grouped_update_is_chosen_by_backend_unless_named(algo):
+def test_the_grouped_update_is_chosen_unless_named(algo):
     assert _agent(algo).update_options is not None
     assert make_agent(algo, option_update="per_option").update_options is None
-    # auto: the actor-critic's grouped on every backend; DQN's on a CPU (the tests'
-    # backend), per option on an accelerator
-    grouped_here = algo == "actor-critic" or jax.default_backend() == "cpu"
-    assert (make_agent(algo).update_options is not None) == grouped_here
+    assert make_agent(algo).update_options is not None  # auto: grouped on every backend
     with pytest.raises(ValueError, match="option_update"):
         make_agent(algo, option_update="sometimes")
 

@@ -71,8 +71,8 @@ class DQNConfig:
     reward_scale: float = traced(1.0)  # rewards are multiplied by this before the TD target
     # how joint fine-tuning updates its learners, as PPOConfig's option_update: "grouped"
     # (``dqn_options``: the rollout stored by row index, the same buffers and steps),
-    # "per_option" (each option's update over every row, vmapped) or "auto" (grouped on
-    # a CPU, where it is measured faster: benchmarks/RESULTS.md, "The cost of a joint update")
+    # "per_option" (each option's update over every row, vmapped) or "auto" (grouped: faster
+    # on a CPU and a GPU, benchmarks/RESULTS.md, "The cost of a joint update")
     option_update: str = static("auto")
 
     def __post_init__(self):
@@ -168,8 +168,7 @@ def make_agent(config: DQNConfig | None = None, layout=()) -> Agent:
         return state.replace(params=params, target_params=params, decisions_seen=seen,
                              grad_steps=jnp.maximum(state.grad_steps, seen))
 
-    grouped = config.option_update == "grouped" or (
-        config.option_update == "auto" and jax.default_backend() == "cpu")
+    grouped = config.option_update != "per_option"
     return Agent("dqn", init, act, update, policy_logits, "greedy", warm_start,
                  update_options=make_update_options(config, step) if grouped else None)
 
