@@ -289,7 +289,8 @@ class Engine:
 
     def evaluate(self, *args, **kwargs) -> tuple[dict, float]:
         """``evaluate_args``' episodes: their result and the seconds spent compiling."""
-        return self.episode_calls(self.evaluate_args(*args, **kwargs), self.cfg.evaluation.eval_envs)
+        return self.episode_calls(self.evaluate_args(*args, **kwargs),
+                                  self.cfg.evaluation.eval_envs)
 
     def evaluate_args(self, keys, bank, learned, learner_state=None, place=_same, *,
                       policy: str | None = None, due: list[bool] | None = None,
