@@ -32,7 +32,7 @@ def main() -> None:
         for threshold in (0.8, 0.05):
             results = {}
             for name, bucket in (("whole", S), ("small", BUCKET)):
-                engine.episode_calls = EpisodeCalls(engine._compile_episodes, True, bucket)
+                engine.episode_calls = EpisodeCalls(engine.compile_episodes, True, bucket)
                 r, _ = engine.gate(keys, state, bank, learned, [plan.option] * S,
                                    [plan.start] * S, due, [threshold] * S)
                 results[name] = {k: np.asarray(v)[due_seeds] for k, v in jax.device_get(r).items()}

@@ -181,7 +181,7 @@ def test_a_few_due_seeds_of_many_run_as_a_smaller_batch_with_their_own_numbers()
     keys = jax.random.split(jax.random.PRNGKey(7), 3)
     results, calls = {}, {}
     for bucket in (3, 1):  # 3 seeds: a bucket of 3 never applies, one of 1 does
-        engine.episode_calls = calls[bucket] = EpisodeCalls(engine._compile_episodes, True, bucket)
+        engine.episode_calls = calls[bucket] = EpisodeCalls(engine.compile_episodes, True, bucket)
         ahead = CompileAhead(threads=1, enabled=True)
         engine.episodes_ahead(engine.gate_args(keys, state, bank, learned, [1] * 3, [0] * 3,
                                                [False] * 3, [0.8] * 3), cfg.gate_envs, ahead)

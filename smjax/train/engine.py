@@ -90,7 +90,7 @@ class Engine:
         self.joint_chunk = jax.jit(seeds(self._joint_chunk), donate_argnums=(0,))
         # the gate's and the evaluation's episodes, one program
         self.episodes = seed_batched_episodes(self.runner, self.gamma, self.seed_by_seed)
-        self.episode_calls = EpisodeCalls(self._compile_episodes, not self.seed_by_seed)
+        self.episode_calls = EpisodeCalls(self.compile_episodes, not self.seed_by_seed)
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
         self.program_identity: dict | None = None
@@ -278,7 +278,8 @@ class Engine:
         ``evaluate_args``) on ``ahead``'s thread, unless it is compiled or under way."""
         self.episode_calls.ahead(args, num_envs, ahead)
 
-    def _compile_episodes(self, args: tuple, num_envs: int):
+    def compile_episodes(self, args: tuple, num_envs: int):
+        """The episodes program compiled for ``args`` (``gate_args`` or ``evaluate_args``)."""
         return self.compile(f"episodes-{num_envs}", self.episodes, args, static=(num_envs,))
 
     def _seed_temperatures(self, policy: str, num_seeds: int) -> jax.Array:
