@@ -4,7 +4,7 @@ from hier_env import make_keydoor
 from smjax.agents import make_agent
 from smjax.train import TrainConfig
 from smjax.train.engine import Engine
-from smjax.train.hooks import Hook
+from smjax.train.hooks import Hook, import_ahead
 from smjax.train.loop import HierarchyTrainer
 from smjax.train.plans import plan_levels
 
@@ -252,3 +252,18 @@ def test_a_callers_hook_gets_each_sweep_points_results_with_its_directory(tmp_pa
     run(make_keydoor(), cfg, [0], progress=False, sweep={"agent.learning_rate": lrs},
         hooks=[recorder])
     assert [(r.out_dir, f) for r, f in recorder.outcomes] == [(None, [])] * 2
+
+
+def test_a_hooks_modules_are_imported_on_a_thread_and_a_failing_one_waits_for_its_use():
+    import sys
+
+    class Later(Hook):
+        modules = ("this_module_does_not_exist", "colorsys")
+
+    sys.modules.pop("colorsys", None)
+    thread = import_ahead([Hook(), Later()])
+    assert thread is not None and thread.name == "smjax-import-ahead"
+    thread.join(timeout=60)
+    # the missing module raised nowhere; the one after it was still imported
+    assert not thread.is_alive() and "colorsys" in sys.modules
+    assert import_ahead([Hook()]) is None  # no modules named: no thread

@@ -189,7 +189,7 @@ def test_a_few_due_seeds_of_many_run_as_a_smaller_batch_with_their_own_numbers()
         for due in ([False, True, False], [True, False, True]):
             results[bucket, tuple(due)], _ = engine.gate(
                 keys, state, bank, learned, [1] * 3, [0] * 3, due, [0.8] * 3)
-    # the programs compiled ahead were the ones called: nothing compiled where it ran
+    # the calls found the programs compiled ahead under their own layouts: no other key
     assert len(calls[1].compiled) == 2 and len(calls[3].compiled) == 1
     small, whole = results[1, (False, True, False)], results[3, (False, True, False)]
     for name in whole:
