@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from smjax.options.episodes import SEED_AXES, SKIP
-from smjax.train.ahead import CompileAhead, resolve, signature
+from smjax.train.ahead import CompileAhead, placed, resolve, signature
 
 # A batch this small costs about what one seed costs on a GPU: the episodes program is
 # bound by its per-tick launches up to ~30 seeds (a gate attempt on one H100: 0.129 s for
@@ -87,9 +87,7 @@ class EpisodeCalls:
     def small_shapes(self, args: tuple) -> tuple:
         """The smaller batch's arguments (shapes, laid out as ``args``')."""
         small = jax.eval_shape(gather, args, jax.ShapeDtypeStruct((self.bucket,), jnp.int32))
-        sharding = getattr(jax.tree.leaves(args)[0], "sharding", None)
-        return jax.tree.map(lambda x: jax.ShapeDtypeStruct(
-            x.shape, x.dtype, sharding=sharding, weak_type=x.weak_type), small)
+        return placed(small, getattr(jax.tree.leaves(args)[0], "sharding", None))
 
 
 @jax.jit
