@@ -146,9 +146,9 @@ def main(argv=None) -> None:
         agent_cfg["option_block"] = args.block
     # the grouped update, whatever "auto" picks on this backend
     grouped_cfg = dict(agent_cfg, option_update="grouped")
-    engine, plain = build(args, grouped_cfg if args.algo != "dqn" else agent_cfg)
+    engine, plain = build(args, grouped_cfg)
     if args.algo == "dqn":  # no loop over blocks: nothing per pass to vary
-        grouped_engines = {"grouped": build(args, grouped_cfg)[0]}
+        grouped_engines = {"grouped": engine}
     else:
         grouped_engines = {
             ("grouped" if k == 0 else f"grouped_{k}"): build(
