@@ -6,6 +6,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from envs_for_tests import EPISODE_TICKS, Corridor, make_option_driver_train, option_observation
 from smjax.agents import make_agent
@@ -131,6 +133,30 @@ def test_minibatches_partition_ticks_and_share_decisions_evenly():
     per_minibatch = np.asarray(decision)[np.asarray(idx)].__and__(np.asarray(real)).sum(1)
     assert per_minibatch.sum() == int(decision.sum())
     assert per_minibatch.max() - per_minibatch.min() <= 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 5000), rate=st.floats(0.0, 1.0), seed=st.integers(0, 2**31 - 1))
+def test_decision_order_is_a_permutation_with_the_decisions_first(n, rate, seed):
+    from smjax.agents.ppo_update import decision_order
+    decision = np.random.default_rng(seed).random(n) < rate
+    order = np.asarray(decision_order(jax.random.PRNGKey(seed), jnp.asarray(decision)))
+    np.testing.assert_array_equal(np.sort(order), np.arange(n))
+    assert decision[order[: decision.sum()]].all()
+
+
+def test_decision_order_is_uniform_and_keeps_its_fallback_for_long_batches():
+    """Every item is as likely to come first; a batch too long for the one-key sort's
+    random bits (over 2^15 items) still gives a permutation, decisions first."""
+    from smjax.agents.ppo_update import decision_order
+    keys = jax.random.split(jax.random.PRNGKey(0), 4000)
+    first = np.asarray(jax.vmap(lambda k: decision_order(k, jnp.ones(8, bool))[0])(keys))
+    counts = np.bincount(first, minlength=8)
+    assert counts.min() > 4000 / 8 * 0.8 and counts.max() < 4000 / 8 * 1.2, counts
+    decision = np.random.default_rng(1).random(40_000) < 0.3
+    order = np.asarray(decision_order(jax.random.PRNGKey(1), jnp.asarray(decision)))
+    np.testing.assert_array_equal(np.sort(order), np.arange(40_000))
+    assert decision[order[: decision.sum()]].all()
 
 
 def test_ppo_target_kl_stops_the_update_once_the_policy_drifts():

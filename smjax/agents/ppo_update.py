@@ -12,11 +12,30 @@ from smjax.agents.networks import masked_entropy, masked_log_softmax, masked_mea
 from smjax.agents.smdp import complete_decisions, episodes_with_decision, smdp_gae
 
 
+# Fewest random bits per item for the one-key sort; below them, ties (broken by index)
+# would be common enough to matter, so the order falls back to a two-operand argsort.
+MIN_NOISE_BITS = 16
+
+
 def decision_order(key: jax.Array, decision: jax.Array) -> jax.Array:
     """int ``[N]``: every item, the decisions first in a random order (then the others);
-    the decision at rank r goes to minibatch r % M (``ppo.minibatch_indices``)."""
-    noise = jax.random.uniform(key, decision.shape)
-    return jnp.argsort(jnp.where(decision, noise, noise + 2.0))
+    the decision at rank r goes to minibatch r % M (``ppo.minibatch_indices``).
+
+    One uint32 key per item, "not a decision" in the top bit, random bits next and the
+    item's index in the low bits, sorted alone: a one-operand sort runs ~5x faster on
+    a CPU than an argsort (a key and an index sorted together), and the index comes
+    back from the low bits. Ties of the random bits go by index, a bias of order
+    N^2 / 2^(noise bits) pairs that the 16 bits or more kept make negligible."""
+    n = decision.shape[0]
+    index_bits = max(1, (n - 1).bit_length())
+    noise_bits = 31 - index_bits
+    if noise_bits < MIN_NOISE_BITS:
+        noise = jax.random.uniform(key, decision.shape)
+        return jnp.argsort(jnp.where(decision, noise, noise + 2.0))
+    noise = jax.random.bits(key, decision.shape, jnp.uint32) >> (32 - noise_bits)
+    packed = (((~decision).astype(jnp.uint32) << 31) | (noise << index_bits)
+              | jnp.arange(n, dtype=jnp.uint32))
+    return (jnp.sort(packed) & ((1 << index_bits) - 1)).astype(jnp.int32)
 
 
 def decision_data(config, traj: Transition, hp) -> tuple[tuple, jax.Array]:
