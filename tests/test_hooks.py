@@ -80,6 +80,63 @@ def _writes(tmp_path, monkeypatch, gap_writes: float) -> tuple[list, int]:
     return written, sum(r.stage_ended for r in recorder.reports)
 
 
+def test_a_failed_checkpoint_write_stops_the_run_at_the_next_chunk_and_keeps_the_last(
+        tmp_path, monkeypatch):
+    # checkpoints are written on a thread while training goes on: a write that fails still
+    # stops the run, with its one-line error, and the checkpoint before it stays in force
+    import pytest
+
+    from smjax.train import checkpoint as ckpt
+    from smjax.train.hooks import CheckpointHook
+
+    monkeypatch.setattr(CheckpointHook, "STAGE_GAP_WRITES", 0)  # every stage end writes
+    real, steps = ckpt.save_checkpoint, []
+
+    def second_write_fails(out_dir, step, arrays, meta):
+        steps.append(step)
+        if len(steps) == 2:
+            raise ckpt.CheckpointError("disk full: the previous checkpoint is kept")
+        return real(out_dir, step, arrays, meta)
+
+    monkeypatch.setattr(ckpt, "save_checkpoint", second_write_fails)
+    recorder = Recorder()
+    cfg = SMALL.replace(checkpoint_every=1e9)
+    trainer = _trainer([recorder, CheckpointHook(tmp_path, cfg, {})], cfg=cfg)
+    with pytest.raises(ckpt.CheckpointError, match="disk full"):
+        trainer.run()
+    assert len(steps) == 2 and ckpt.load_meta(tmp_path)["step"] == steps[0]
+    assert recorder.calls[-1] == "chunk"  # it never reached the end
+
+
+def test_a_checkpoint_holds_back_its_own_threads_stderr_only(capsys):
+    """While a save runs on its thread, training's stderr (a warning, the progress bar)
+    passes straight through; the save's own is held, then passed on, or dropped if the
+    save failed."""
+    import sys
+    import threading
+
+    from smjax.train.checkpoint_orbax import quiet_orbax
+
+    for failed in (False, True):
+        inside, release = threading.Event(), threading.Event()
+
+        def save():
+            with quiet_orbax() as quiet:
+                print("the save's", file=sys.stderr)
+                inside.set()
+                release.wait(10)
+                quiet["failed"] = failed
+
+        thread = threading.Thread(target=save)
+        thread.start()
+        inside.wait(10)
+        print("training's", file=sys.stderr)
+        assert capsys.readouterr().err == "training's\n"
+        release.set()
+        thread.join(10)
+        assert capsys.readouterr().err == ("" if failed else "the save's\n")
+
+
 def test_stage_end_checkpoints_are_coalesced_but_the_first_and_last_are_written(
         tmp_path, monkeypatch):
     # no gap: a write at every chunk that ended a stage

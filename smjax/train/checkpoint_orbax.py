@@ -5,8 +5,8 @@ orbax writes from background threads. A failure there (read-only or full file sy
 I/O error) makes it log every writer thread's traceback, its I/O library print more, and
 asyncio report each failed future when it is garbage collected: hundreds of lines, often
 after the save has already reported the failure. ``quiet_orbax`` holds all of that back
-while a save runs; ``first_line`` and ``is_disk_full`` read the failure for the one line
-the caller raises.
+while a save runs (only the save's own threads': a save runs beside training);
+``first_line`` and ``is_disk_full`` read the failure for the one line the caller raises.
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import io
 import logging
 import os
 import sys
+import threading
 import traceback
 from typing import Any
 
@@ -73,6 +74,26 @@ class _OrbaxFutureNoise(logging.Filter):
 _FUTURE_NOISE = _OrbaxFutureNoise()
 
 
+class _HeldForTheSave(io.TextIOBase):
+    """``sys.stderr`` while a save runs: what the saving thread and the threads it starts
+    (orbax's) write is held; every other thread's (training goes on while a checkpoint
+    is written) passes straight through."""
+
+    def __init__(self, through, held: io.StringIO):
+        self.through, self.held = through, held
+        self.others = set(threading.enumerate()) - {threading.current_thread()}
+
+    def write(self, text: str) -> int:
+        saving = threading.current_thread() not in self.others
+        return (self.held if saving else self.through).write(text)
+
+    def flush(self) -> None:
+        self.through.flush()
+
+    def __getattr__(self, name):  # encoding, isatty, fileno, ...: the real stream's
+        return getattr(self.through, name)
+
+
 @contextlib.contextmanager
 def quiet_orbax():
     """A failed save makes orbax log every writer thread's traceback and its I/O library
@@ -86,7 +107,7 @@ def quiet_orbax():
     for logger in loggers:
         logger.addFilter(quiet)
     try:
-        with contextlib.redirect_stderr(held):
+        with contextlib.redirect_stderr(_HeldForTheSave(sys.stderr, held)):
             yield state
     except BaseException:
         state["failed"] = True

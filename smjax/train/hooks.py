@@ -12,8 +12,10 @@ per point). The hooks here: TensorBoard (``TensorBoardHook``) and checkpoints
 from __future__ import annotations
 
 import importlib
+import sys
 import threading
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -72,6 +74,10 @@ class Hook:
         """The evaluated results are ready: once per run, once per point of a sweep (in
         ``sweep.json``'s order). Every process gets them, as it gets the chunks; a hook
         that writes files writes on process 0 (``smjax.train.distributed.is_writer``)."""
+
+    def close(self) -> None:
+        """The trainer stops, whether it finished or an error (or Ctrl-C) ended it: finish
+        what is under way. Raises nothing."""
 
 
 def import_ahead(hooks) -> threading.Thread | None:
@@ -135,12 +141,49 @@ class CheckpointHook(Hook):
         self.last_write_seconds = 0.0
         self.wrote_once = False
         self.stage_pending = False  # a stage ended since the last write
+        self.writer: ThreadPoolExecutor | None = None  # the writes' thread, made at the first
+        self.pending: Future | None = None  # the write under way (or done, not yet checked)
 
     def chunk(self, trainer, report: ChunkReport) -> None:
+        self.raise_failed_write()
         self.stage_pending |= report.stage_ended
         if self.due() or (self.stage_pending and self.stage_write_due(trainer)):
             with TIMELINE.span("checkpoint writes"):
                 self.save(trainer)
+
+    def end(self, trainer) -> None:
+        # the last write (every stage done) is on disk before the run goes on to evaluate
+        with TIMELINE.span("checkpoint writes"):
+            self.wait()
+
+    def close(self) -> None:
+        """The run stops, however it stops: the write under way finishes (the checkpoint
+        before it stays in force until it has); a failure the run cannot raise any more
+        (it is ending with another error) is said in one line."""
+        try:
+            self.wait()
+        except ckpt.CheckpointError as err:
+            print(f"smjax: the last checkpoint was not written: {err}", file=sys.stderr)
+        if self.writer is not None:
+            self.writer.shutdown(wait=True)
+            self.writer = None
+
+    def write_seconds(self) -> float:
+        """How long the last write took; one still under way has taken at least this long."""
+        if self.pending is not None and not self.pending.done():
+            return max(self.last_write_seconds, time.perf_counter() - self.last_save)
+        return self.last_write_seconds
+
+    def wait(self) -> None:
+        """Until the write under way is on disk; its failure raised here."""
+        pending, self.pending = self.pending, None
+        if pending is not None:
+            pending.result()
+
+    def raise_failed_write(self) -> None:
+        """A write that failed since the last chunk stops the run now, in one line."""
+        if self.pending is not None and self.pending.done():
+            self.wait()
 
     def due(self) -> bool:
         due = time.perf_counter() - self.last_save >= self.every
@@ -149,24 +192,42 @@ class CheckpointHook(Hook):
 
     def stage_write_due(self, trainer) -> bool:
         """Whether a stage end's checkpoint is written now (process 0 decides)."""
-        gap = self.STAGE_GAP_WRITES * self.last_write_seconds
+        gap = self.STAGE_GAP_WRITES * self.write_seconds()
         due = (not trainer.training() or not self.wrote_once
                or time.perf_counter() - self.last_save >= gap)
         return dist.agree(due)
 
     def save(self, trainer) -> None:
-        """Checkpoint (collective with several processes: all gather, process 0 writes)."""
-        began = time.perf_counter()
+        """Checkpoint (collective with several processes: all gather, process 0 writes).
+
+        The arrays are copied to the host here, and written on a thread while training
+        goes on (orbax's writes, their fsyncs and the swap of ``latest.json`` take ~0.25 s
+        on a CPU, seconds for many seeds on a GPU); one write at a time, in order. A
+        failed write stops the run at the next chunk with its one-line error, the
+        checkpoint before it still in force; the run's last write is waited for
+        (``end``), as is one under way when the run stops (``close``)."""
+        self.wait()
         # trained: every stage is done, so a resume only evaluates and writes results
         meta = {"host": trainer.state.to_json(), "run": self.run_meta,
                 "settings": self.settings, "format": ckpt.CHECKPOINT_FORMAT,
                 "trained": not trainer.training()}
-        arrays = dist.gather(trainer.arrays) if dist.is_multiprocess() else trainer.arrays
+        # host copies: the next chunk reuses (donates) the state's device buffers, and a
+        # host view of a CPU buffer would change with them
+        arrays = jax.tree.map(np.array, dist.gather(trainer.arrays))
         if dist.is_writer():
-            ckpt.save_checkpoint(self.out_dir, trainer.state.chunks, arrays, meta)
+            if self.writer is None:
+                self.writer = ThreadPoolExecutor(1, thread_name_prefix="smjax-checkpoint")
+            self.pending = self.writer.submit(self._write, trainer.state.chunks, arrays, meta)
         self.last_save = time.perf_counter()
-        self.last_write_seconds = self.last_save - began
         self.wrote_once, self.stage_pending = True, False
+
+    def _write(self, step: int, arrays, meta: dict) -> None:
+        began = time.perf_counter()
+        try:
+            ckpt.save_checkpoint(self.out_dir, step, arrays, meta)
+        finally:
+            self.last_write_seconds = time.perf_counter() - began
+            TIMELINE.inside("checkpoint writes (a thread)", self.last_write_seconds)
 
     def load(self, like: TrainArrays, num_stages: int, step: str | None = None,
              checked: dict | None = None) -> tuple[TrainArrays, TrainerState] | None:

@@ -155,6 +155,8 @@ class HierarchyTrainer:
             return self.train_and_evaluate(t_start)
         finally:
             self.ahead.close()
+            for hook in self.hooks:
+                hook.close()
 
     def train_and_evaluate(self, t_start: float) -> dict:
         """The driver loop: chunks, the stages' accounts and decisions, hooks; then the
