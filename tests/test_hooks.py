@@ -108,6 +108,36 @@ def test_a_failed_checkpoint_write_stops_the_run_at_the_next_chunk_and_keeps_the
     assert recorder.calls[-1] == "chunk"  # it never reached the end
 
 
+def test_the_last_checkpoint_runs_beside_the_evaluation_and_its_failure_is_one_line(
+        tmp_path, monkeypatch, capsys):
+    import jax
+    import numpy as np
+
+    from smjax.train import checkpoint as ckpt
+    from smjax.train.hooks import CheckpointHook
+
+    real, steps = ckpt.save_checkpoint, []
+
+    def record(out_dir, step, arrays, meta):
+        steps.append(step)
+        if meta["trained"] and "fail" in str(out_dir):
+            raise ckpt.CheckpointError("disk full: the previous checkpoint is kept")
+        return real(out_dir, step, arrays, meta)
+
+    monkeypatch.setattr(ckpt, "save_checkpoint", record)
+    cfg = SMALL.replace(checkpoint_every=1e9)
+    raw = _trainer([CheckpointHook(tmp_path / "ok", cfg, {})], cfg=cfg).run()
+    # written by the time the run returns
+    assert ckpt.load_meta(tmp_path / "ok")["meta"]["trained"] and len(steps) >= 2
+    capsys.readouterr()
+    again = _trainer([CheckpointHook(tmp_path / "fail", cfg, {})], cfg=cfg).run()
+    for a, b in zip(jax.tree.leaves(again["final"]), jax.tree.leaves(raw["final"])):
+        np.testing.assert_array_equal(a, b)  # the results stand
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "last checkpoint was not written (disk full" in err
+    assert not ckpt.load_meta(tmp_path / "fail")["meta"]["trained"]  # the one before it
+
+
 def test_a_checkpoint_holds_back_its_own_threads_stderr_only(capsys):
     """While a save runs on its thread, training's stderr (a warning, the progress bar)
     passes straight through; the save's own is held, then passed on, or dropped if the
