@@ -12,6 +12,7 @@ per point). The hooks here: TensorBoard (``TensorBoardHook``) and checkpoints
 from __future__ import annotations
 
 import importlib
+import json
 import sys
 import threading
 import time
@@ -222,6 +223,9 @@ class CheckpointHook(Hook):
         meta = {"host": trainer.state.to_json(), "run": self.run_meta,
                 "settings": self.settings, "format": ckpt.CHECKPOINT_FORMAT,
                 "trained": not trainer.training()}
+        # a copy as it is now: the host state's lists go on changing while the thread
+        # writes the step's manifest and, later, latest.json, which must hold the same
+        meta = json.loads(json.dumps(meta))
         arrays = (dist.gather(trainer.arrays) if dist.is_multiprocess()
                   else snapshot(trainer.arrays))
         if dist.is_writer():
