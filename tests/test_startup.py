@@ -51,6 +51,29 @@ def test_the_timeline_starts_at_the_process_start():
     assert Timeline().now() > 0.0
 
 
+_EXIT_HANDLER = """
+import atexit, os, pathlib
+atexit.register(lambda: pathlib.Path(os.environ["SMJAX_TEST_MARKER"]).write_text("ran"))
+"""
+
+
+@pytest.mark.parametrize("argv, code", [(["list"], 0), (["train", "craft/no_such_task"], 2)])
+def test_the_command_ends_with_its_exit_handlers_run_and_its_output_whole(tmp_path, argv, code):
+    # the command skips the interpreter's teardown (os._exit), not what an exit runs
+    (tmp_path / "exit_handler_module.py").write_text(_EXIT_HANDLER)
+    marker = tmp_path / "marker"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), str(tmp_path)]),
+               JAX_PLATFORMS="cpu", SMJAX_TEST_MARKER=str(marker))
+    out = subprocess.run([sys.executable, "-m", "smjax", *argv, "--import", "exit_handler_module"],
+                         env=env, capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert out.returncode == code, out.stderr
+    assert marker.read_text() == "ran"
+    if code == 0:  # a piped stdout is block-buffered: all of it was flushed
+        assert "craft/get_gem" in out.stdout and out.stdout.endswith("\n")
+    else:
+        assert "no_such_task" in out.stderr
+
+
 def _train(out: Path, cache: Path, *extra: str) -> dict:
     """A tiny registered-task run in its own process; its results and profile."""
     env = dict(os.environ, PYTHONPATH=str(ROOT), JAX_PLATFORMS="cpu", SMJAX_CACHE_DIR=str(cache))
