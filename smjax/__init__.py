@@ -1,14 +1,35 @@
 """smjax: vectorized reinforcement learning with option templates, in JAX."""
 import os as _os
 
-# XLA:CPU (jaxlib 0.10) can deadlock executing larger vmapped programs (every thread
-# waiting, no progress; seen with batched network inits and 64-env MJX batches) under its
-# concurrency-optimized scheduler. Turning that scheduler off avoids it. The flag must be
-# set before the first computation; SMJAX_XLA_WORKAROUND=0 leaves XLA_FLAGS alone.
-_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
-if _os.environ.get("SMJAX_XLA_WORKAROUND", "1") != "0" and \
-        "xla_cpu_enable_concurrency_optimized_scheduler" not in _os.environ.get("XLA_FLAGS", ""):
-    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " " + _FLAG).strip()
+# Two XLA:CPU settings, added to XLA_FLAGS before the first computation unless the user set
+# them; SMJAX_XLA_WORKAROUND=0 leaves XLA_FLAGS alone.
+# * XLA:CPU (jaxlib 0.10) can deadlock executing larger vmapped programs (every thread
+#   waiting, no progress; seen with batched network inits and 64-env MJX batches) under its
+#   concurrency-optimized scheduler. Turning that scheduler off avoids it.
+# * XLA:CPU (jaxlib 0.10 and 0.11) hands dot products to YNNPACK. For these networks' small
+#   layers (64 units, minibatches of a few hundred rows) its own Eigen dots are faster: a
+#   PPO level chunk ~1.3x on 2 cores (benchmarks/RESULTS.md, "XLA:CPU's dots"). Older
+#   jaxlibs do not know the flag (an unknown flag stops XLA), so it goes only to these.
+_FLAGS = {"xla_cpu_enable_concurrency_optimized_scheduler": "false",
+          "xla_cpu_experimental_ynn_fusion_type": ""}
+
+
+def _jaxlib_knows_ynn() -> bool:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        major, minor = (int(part) for part in version("jaxlib").split(".")[:2])
+    except (PackageNotFoundError, ValueError):
+        return False
+    return (major, minor) >= (0, 10)
+
+
+if _os.environ.get("SMJAX_XLA_WORKAROUND", "1") != "0":
+    _given = _os.environ.get("XLA_FLAGS", "")
+    _add = [f"--{name}={value}" for name, value in _FLAGS.items() if name not in _given
+            and (name != "xla_cpu_experimental_ynn_fusion_type" or _jaxlib_knows_ynn())]
+    if _add:
+        _os.environ["XLA_FLAGS"] = " ".join([_given] + _add).strip()
 
 from smjax.core.registry import make, registry  # noqa: E402
 from smjax.core.version import smjax_version  # noqa: E402

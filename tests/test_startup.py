@@ -184,3 +184,23 @@ def test_a_cache_directory_the_user_chose_caches_small_programs_unless_told_othe
 
     assert answer() == (str(tmp_path), 0.0)
     assert answer(JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="2.5") == (str(tmp_path), 2.5)
+
+
+def _flags_after_import(**env_vars) -> str:
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "SMJAX_XLA_WORKAROUND")}
+    env.update(PYTHONPATH=str(ROOT), **env_vars)
+    out = subprocess.run([sys.executable, "-c", "import os, smjax; print(os.environ.get('XLA_FLAGS'))"],
+                         env=env, capture_output=True, text=True, check=True, timeout=120)
+    return out.stdout.strip()
+
+
+def test_import_sets_the_cpu_flags_and_keeps_a_users_own():
+    flags = _flags_after_import()
+    assert "--xla_cpu_enable_concurrency_optimized_scheduler=false" in flags
+    assert "--xla_cpu_experimental_ynn_fusion_type=" in flags.split()  # YNNPACK's dots off
+    mine = "--xla_cpu_experimental_ynn_fusion_type=individual_dot"
+    flags = _flags_after_import(XLA_FLAGS=mine).split()
+    assert mine in flags and flags.count(mine) == 1
+    assert not any(f == "--xla_cpu_experimental_ynn_fusion_type=" for f in flags)
+    assert _flags_after_import(SMJAX_XLA_WORKAROUND="0", XLA_FLAGS="--xla_dump_to=x") == \
+        "--xla_dump_to=x"
