@@ -26,7 +26,7 @@ from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner,
 from smjax.train.ahead import CompileAhead
 from smjax.train.config import TrainConfig
 from smjax.train.episode_calls import EpisodeCalls
-from smjax.train.program_cache import compile_program
+from smjax.train.program_cache import SavedOnFirstCall, compile_program
 from smjax.train.seed_arrays import finite_flag
 
 
@@ -94,7 +94,10 @@ class Engine:
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
         self.program_identity: dict | None = None
-        self._init = jax.jit(seeds(lambda k: agent.init(k, self.example_obs, self.num_actions)))
+        # the start-up's programs, loaded untraced by a repeated run (as the chunks are)
+        saved = functools.partial(SavedOnFirstCall, identity_of=lambda: self.program_identity)
+        self._init = saved(jax.jit(seeds(lambda k: agent.init(k, self.example_obs,
+                                                              self.num_actions))), "init")
         # host-side array plumbing as one program each, not one tiny program per leaf
         self._per_option = jax.jit(self._copies_per_option)
         self._warm = jax.jit(jax.vmap(agent.warm_start))
@@ -102,7 +105,7 @@ class Engine:
             self._copies_per_option(learners), bank))
         # jitted, so it also slices a bank sharded over processes
         self._bank_entry0 = jax.jit(lambda bank: jax.tree.map(lambda p: p[:, 0], bank))
-        self.reset = jax.jit(jax.vmap(self._reset))  # keys [S], start option ids [S]
+        self.reset = saved(jax.jit(jax.vmap(self._reset)), "reset")  # keys [S], start ids [S]
         # the same episodes for a new learner (a fine-tuning turn's): leading axis S
         self.hand_over = jax.jit(jax.vmap(self.runner.hand_over))
 
