@@ -151,7 +151,7 @@ class Engine:
         with fine-tuning's hyper-parameters, copied once per option), fresh whole-task
         episodes from the root, and no pending decisions (one record per option)."""
         learners = self._warm_joint(learners, bank)
-        carry = self.reset(reset_keys, jnp.zeros(reset_keys.shape[:1], jnp.int32))
+        carry = self.reset(reset_keys, np.zeros(reset_keys.shape[:1], np.int32))
         return SeedState(carry.replace(pending=self._per_option(carry.pending)),
                          learners, keys)
 

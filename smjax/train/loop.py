@@ -118,10 +118,11 @@ class HierarchyTrainer:
         learner = self.slots.init_learner(engine, k_init)
         joint = self.finetune is not None and self.finetune.joint
         bank = engine.new_bank(learner)
+        # host zeros: the trainer commits them to the device (no program per array)
         return TrainArrays(
-            bank=bank, keys=keys, learned=jnp.zeros((S, engine.h.num_options), bool),
-            state=SeedState(engine.reset(k_reset, jnp.zeros((S,), jnp.int32)), learner, keys),
-            **SuccessWindow.pair(S, self.cfg.window_slots),
+            bank=bank, keys=keys, learned=np.zeros((S, engine.h.num_options), bool),
+            state=SeedState(engine.reset(k_reset, np.zeros((S,), np.int32)), learner, keys),
+            **SuccessWindow.pair(S, self.cfg.window_slots, np),
             levels_bank=bank if self.finetune else None,  # arrays are immutable: no copy
             joint=(engine.joint_state(learner, bank, k_reset, keys) if joint else None))
 

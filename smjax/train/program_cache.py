@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 
 from smjax.core.timeline import TIMELINE
 from smjax.core.files import atomic_write_bytes
@@ -116,6 +118,8 @@ class SavedOnFirstCall:
         self._programs: dict = {}
 
     def __call__(self, *args):
+        # a host array as the device array it becomes: one program for both
+        args = jax.tree.map(lambda x: jnp.asarray(x) if isinstance(x, np.ndarray) else x, args)
         leaves, tree = jax.tree.flatten(args)
         identity = self._identity_of()
         if identity is None or any(isinstance(x, jax.core.Tracer) for x in leaves):

@@ -45,9 +45,10 @@ class SuccessWindow:
                    next=xp.zeros((num_seeds,), xp.int32))
 
     @classmethod
-    def pair(cls, num_seeds: int, slots: int) -> dict:
+    def pair(cls, num_seeds: int, slots: int, xp=jnp) -> dict:
         """``TrainArrays``' two windows, empty."""
-        return {"window": cls.empty(num_seeds, slots), "task_window": cls.empty(num_seeds, slots)}
+        return {"window": cls.empty(num_seeds, slots, xp),
+                "task_window": cls.empty(num_seeds, slots, xp)}
 
     def push(self, total: jax.Array, count: jax.Array, size: jax.Array):
         """Add a batch of ``count`` episodes (none: nothing added) whose successes sum to
