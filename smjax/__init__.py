@@ -7,9 +7,10 @@ import os as _os
 #   waiting, no progress; seen with batched network inits and 64-env MJX batches) under its
 #   concurrency-optimized scheduler. Turning that scheduler off avoids it.
 # * XLA:CPU (jaxlib 0.10 and 0.11) hands dot products to YNNPACK. For these networks' small
-#   layers (64 units, minibatches of a few hundred rows) its own Eigen dots are faster: a
-#   PPO level chunk ~1.3x on 2 cores (benchmarks/RESULTS.md, "XLA:CPU's dots"). Older
-#   jaxlibs do not know the flag (an unknown flag stops XLA), so it goes only to these.
+#   layers (64 units, minibatches of a few hundred rows) its own Eigen dots are faster: a PPO
+#   or football chunk 1.2-1.3x with 64 environments a seed, as fast or a little faster with
+#   128 (benchmarks/RESULTS.md, "XLA:CPU's own dots"). Older jaxlibs do not know the flag (an
+#   unknown flag stops XLA), so it goes only to these.
 _FLAGS = {"xla_cpu_enable_concurrency_optimized_scheduler": "false",
           "xla_cpu_experimental_ynn_fusion_type": ""}
 
