@@ -11,24 +11,26 @@ import os as _os
 #   or football chunk 1.2-1.3x with 64 environments a seed, as fast or a little faster with
 #   128 (benchmarks/RESULTS.md, "XLA:CPU's own dots"). Older jaxlibs do not know the flag (an
 #   unknown flag stops XLA), so it goes only to these.
-_FLAGS = {"xla_cpu_enable_concurrency_optimized_scheduler": "false",
-          "xla_cpu_experimental_ynn_fusion_type": ""}
 
 
-def _jaxlib_knows_ynn() -> bool:
+def _jaxlib_at_least(major: int, minor: int) -> bool:
+    """From the installed metadata: importing jaxlib, or smjax.core (``smjax_version``'s
+    module, whose imports might compute), could start XLA before its flags are set."""
     from importlib.metadata import PackageNotFoundError, version
 
     try:
-        major, minor = (int(part) for part in version("jaxlib").split(".")[:2])
+        installed = tuple(int(part) for part in version("jaxlib").split(".")[:2])
     except (PackageNotFoundError, ValueError):
         return False
-    return (major, minor) >= (0, 10)
+    return installed >= (major, minor)
 
 
 if _os.environ.get("SMJAX_XLA_WORKAROUND", "1") != "0":
+    _flags = {"xla_cpu_enable_concurrency_optimized_scheduler": "false"}
+    if _jaxlib_at_least(0, 10):
+        _flags["xla_cpu_experimental_ynn_fusion_type"] = ""
     _given = _os.environ.get("XLA_FLAGS", "")
-    _add = [f"--{name}={value}" for name, value in _FLAGS.items() if name not in _given
-            and (name != "xla_cpu_experimental_ynn_fusion_type" or _jaxlib_knows_ynn())]
+    _add = [f"--{name}={value}" for name, value in _flags.items() if name not in _given]
     if _add:
         _os.environ["XLA_FLAGS"] = " ".join([_given] + _add).strip()
 

@@ -28,7 +28,7 @@ def shadowing_folder() -> str | None:
 
 def warn_if_shadowed() -> None:
     """Warn once, on import: the package's ``__init__`` never ran, so nothing it sets up
-    (``smjax.make``, ``smjax.__version__``, the XLA flag) is there."""
+    (``smjax.make``, ``smjax.__version__``, the XLA flags) is there."""
     folder = shadowing_folder()
     if folder is not None:
         warnings.warn(f"the folder {folder} (no __init__.py) shadows the installed smjax "
