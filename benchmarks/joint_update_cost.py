@@ -16,8 +16,9 @@ its own learner), and times, as compiled, seed-vmapped programs on the same inpu
   agent without ``update_options`` and with it.
 
 ``--algo`` picks the learner (ppo, actor-critic, dqn), ``--agent KEY=JSON`` sets a field
-of its config. ``--per-step 1 16`` times the grouped update (and chunk) at 1 and at 16
-blocks per pass of its loop (``option_blocks_per_step``).
+of its config; ``--kernels`` (an accelerator) also reports each program's kernels
+(``benchmarks/_kernels.py``). ``--per-step 1 16`` times the grouped update (and chunk)
+at 1 and at 16 blocks per pass of its loop (``option_blocks_per_step``).
 
 The variants alternate within every repeat, so a noisy (shared) machine hits each alike;
 medians are printed, with the ratio to the first variant.
@@ -31,11 +32,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
+import sys
 import time
 
 import jax
 import jax.numpy as jnp
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _kernels import describe, kernel_profile  # noqa: E402
 
 
 def build(args, agent_cfg: dict):
@@ -138,6 +144,9 @@ def main(argv=None) -> None:
                     help="option_block of PPO or the actor-critic (default: its own)")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--skip-chunk", action="store_true")
+    ap.add_argument("--kernels", action="store_true",
+                    help="also trace each variant's kernels (an accelerator: launches, busy "
+                         "time, the longest kernels)")
     ap.add_argument("--per-step", type=int, nargs="+", default=[0], metavar="K",
                     help="blocks per pass of the grouped loop to time (0: the backend's)")
     args = ap.parse_args(argv)
@@ -185,6 +194,15 @@ def main(argv=None) -> None:
             timed(lambda st, *r, e=eng: e.joint_chunk(st, *r)[1],
                   lambda: (jax.tree.map(jnp.copy, state),) + rest, out, name)
     report(out, args)
+    if args.kernels:
+        for name, prog in progs.items():
+            print(f"{name} kernels:", flush=True)
+            print(describe(kernel_profile(lambda p=prog: p(
+                jax.tree.map(jnp.copy, state.learner), pending, traj, key))), flush=True)
+        for name, (eng, rest) in chunks.items():
+            print(f"{name} kernels:", flush=True)
+            print(describe(kernel_profile(lambda e=eng, r=rest: e.joint_chunk(
+                jax.tree.map(jnp.copy, state), *r)[1])), flush=True)
 
 
 def report(out: dict, args) -> None:

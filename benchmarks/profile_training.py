@@ -15,9 +15,11 @@ as its own compiled program over the same shapes, the parts seed-vmapped (median
 * ``policy_bank``: the frozen policies' logits for every option, environment and tick;
 * ``learner_act``: the learner's own action sampling;
 * ``teleports``: every teleport family applied to every environment;
-* ``gate``: one acceptance-gate attempt of the level (``gate_envs`` episodes);
-* ``host_loop``: per-chunk wall time of the real ``HierarchyTrainer`` loop minus the
-  compiled chunk's own time (bookkeeping, progress, transfers).
+* ``gate``: one acceptance-gate attempt of the level (``gate_envs`` episodes).
+
+With ``--kernels`` (an accelerator) each part also reports, from a profiler trace, the
+kernels one call launches, the time the device was busy with them and the longest ones
+(``benchmarks/_kernels.py``).
 
 The isolated parts overlap (the rollout contains the env step, reset, bank and act) and
 do not add up to the chunk exactly: XLA fuses them differently when they run together.
@@ -32,15 +34,22 @@ from __future__ import annotations
 import argparse
 import inspect
 import json
+import os
 import statistics
+import sys
 import time
 
 import jax
 import jax.numpy as jnp
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _kernels import describe, kernel_profile  # noqa: E402
 
-def _median_time(fn, args, repeats: int) -> tuple[float, float]:
-    """(compile seconds, median run seconds) of ``jax.jit(fn)(*args)``."""
+
+def _median_time(fn, args, repeats: int, kernels: bool = False
+                 ) -> tuple[float, float, dict | None]:
+    """(compile seconds, median run seconds, kernel profile or None) of
+    ``jax.jit(fn)(*args)``."""
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(*args).compile()
     compile_s = time.perf_counter() - t0
@@ -50,7 +59,8 @@ def _median_time(fn, args, repeats: int) -> tuple[float, float]:
         t0 = time.perf_counter()
         jax.block_until_ready(compiled(*args))
         runs.append(time.perf_counter() - t0)
-    return compile_s, statistics.median(runs)
+    profile = kernel_profile(lambda: compiled(*args)) if kernels else None
+    return compile_s, statistics.median(runs), profile
 
 
 def dense_flops(params) -> int:
@@ -109,11 +119,14 @@ def profile(args) -> dict:
     def record(name, fn, fn_args, n=steps):
         if args.parts and name not in args.parts:
             return
-        compile_s, run_s = _median_time(fn, fn_args, args.repeats)
+        compile_s, run_s, kernels = _median_time(fn, fn_args, args.repeats, args.kernels)
         out["parts"][name] = {"seconds": run_s, "compile_seconds": compile_s,
                               "env_steps_per_second": n / run_s}
         print(f"{name:12s} {run_s:8.3f} s  compile {compile_s:6.1f} s  "
               f"{n / run_s:12,.0f} env steps/s", flush=True)
+        if kernels is not None:
+            out["parts"][name]["kernels"] = kernels
+            print(describe(kernels), flush=True)
 
     # the whole chunk, its seeds arranged as the trainer arranges them (trees without
     # ``Engine.seed_by_seed``: side by side) unless --seed-by-seed says; no donation here,
@@ -310,6 +323,9 @@ def main(argv=None) -> None:
     ap.add_argument("--seed-by-seed", choices=("auto", "on", "off"), default="auto",
                     help="the chunk's seeds one after another (on: lax.map) or side by side "
                          "(off: vmap); auto: as the trainer runs them on this backend")
+    ap.add_argument("--kernels", action="store_true",
+                    help="also trace each part's kernels (an accelerator: launches, busy "
+                         "time, the longest kernels)")
     ap.add_argument("--json", help="also write the result here")
     args = ap.parse_args(argv)
     out = profile(args)

@@ -29,13 +29,15 @@ def _ahead_labels() -> dict:
     return {k: v[1] for k, v in TIMELINE.jax.items() if k.startswith("compile ahead")}
 
 
-@pytest.mark.parametrize("from_start", [False, True], ids=["cpu", "accelerator"])
-def test_a_run_compiled_ahead_gives_the_numbers_of_one_compiled_where_needed(monkeypatch,
-                                                                            from_start):
-    # each backend's way (``CompileAhead.for_backend``): on an accelerator the level chunk
-    # compiles from the trainer's construction, for shapes traced before its state exists
+@pytest.mark.parametrize("threads,from_start", [(1, False), (1, True), (3, True)],
+                         ids=["where-first-run", "cpu", "accelerator"])
+def test_a_run_compiled_ahead_gives_the_numbers_of_one_compiled_where_needed(
+        monkeypatch, threads, from_start):
+    # each backend's way (``CompileAhead.for_backend``: a CPU's one thread, an
+    # accelerator's three), and the level chunk compiled where first run: from the start,
+    # it compiles from the trainer's construction, for shapes traced before its state exists
     monkeypatch.setattr(CompileAhead, "for_backend",
-                        classmethod(lambda cls: cls(3 if from_start else 1, from_start=from_start)))
+                        classmethod(lambda cls: cls(threads, from_start=from_start)))
     cfg = TrainConfig(**JOINT_SMALL)
     monkeypatch.setenv("SMJAX_COMPILE_AHEAD", "0")
     before = _ahead_labels()
@@ -148,3 +150,10 @@ def test_a_rehearsed_level_change_and_stage_start_change_no_seed(mode):
     for b, a in zip(jax.tree.leaves(before), jax.tree.leaves(after)):
         np.testing.assert_array_equal(a, b)
     assert trainer.state.to_json() == host
+
+
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="a CPU's choice")
+def test_a_cpu_compiles_ahead_from_the_start_on_one_thread():
+    # one thread beside the main thread's small programs (a second makes a run slower)
+    ahead = CompileAhead.for_backend()
+    assert (ahead.threads, ahead.from_start) == (1, True)

@@ -5,16 +5,17 @@ does before its first chunk (the engine's and the trainer's small programs: rese
 inits, copies); the gate's episodes program, joint fine-tuning's chunk and the final
 evaluation's program are needed seconds or minutes later, and compiling each where it is
 first needed stops training for as long. ``CompileAhead`` compiles them on background
-threads instead (``for_backend``). With a GPU (or another accelerator) all four are
-submitted as soon as the trainer knows its state's shapes (before it builds them), the
-level chunk first, and compile three at a time beside the small programs on the main
-thread: the host's cores are otherwise idle while the device trains. On a CPU the level
-chunk compiles where it is first run and the other three start after the first level
-chunk, one at a time: XLA's compile already keeps a CPU's cores busy, so compiles there
-only gain what the training chunks leave idle. They are the very programs the run would
-compile when first needed (same function, shapes, dtypes and layout), so results do not
-change; where one is needed before its compile has finished, the run waits for it, and
-that wait is its compile time.
+threads instead (``for_backend``). All four are submitted as soon as the trainer knows
+its state's shapes (before it builds them), the level chunk first, so its compile runs
+beside the small programs that the main thread traces, compiles and runs meanwhile. With
+a GPU (or another accelerator) three compile at a time: the host's cores are otherwise idle
+while the device trains. On a CPU one thread compiles them one after another: XLA's
+compile and the training chunks already keep a CPU's cores busy, so a second compile
+thread makes a run slower, while one, started before the main thread's small programs,
+makes it faster than compiling the level chunk where it first runs. They are the very
+programs the run would compile when first needed (same function, shapes, dtypes and
+layout), so results do not change; where one is needed before its compile has finished,
+the run waits for it, and that wait is its compile time.
 
 On by default with one process (several processes keep compiling where needed, in the
 same order on each); ``SMJAX_COMPILE_AHEAD=0`` turns it off.
@@ -88,9 +89,8 @@ class CompileAhead:
 
     def __init__(self, threads: int = 1, enabled: bool | None = None, from_start: bool = False):
         """``from_start``: the trainer submits its level chunk as soon as it knows the
-        shapes, to compile beside its small programs (worth it only where the host has
-        cores to spare: on two CPU cores two compiles at once take longer than one after
-        the other)."""
+        shapes, to compile beside its small programs (otherwise the level chunk compiles
+        where it first runs, and the rest after it)."""
         if enabled is None:
             enabled = (os.environ.get("SMJAX_COMPILE_AHEAD", "1").strip().lower()
                        not in ("0", "false", "off", "no") and jax.process_count() == 1)
@@ -102,11 +102,10 @@ class CompileAhead:
 
     @classmethod
     def for_backend(cls) -> "CompileAhead":
-        """On a CPU one thread, after the first chunk (its cores compile and train); beside
-        an accelerator three, from the start (the level chunk, then the gate's and joint
-        fine-tuning's programs at once)."""
-        on_cpu = jax.default_backend() == "cpu"
-        return cls(1 if on_cpu else 3, from_start=not on_cpu)
+        """From the start: on a CPU one thread (its cores compile and train), beside an
+        accelerator three (the level chunk, then the gate's and joint fine-tuning's
+        programs at once)."""
+        return cls(1 if jax.default_backend() == "cpu" else 3, from_start=True)
 
     def submit(self, label: str, compile_fn: Callable[[Any], Any], args) -> Pending | None:
         """``compile_fn(abstract(args))`` on a thread (None where compiling ahead is off);

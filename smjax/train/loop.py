@@ -218,7 +218,7 @@ class HierarchyTrainer:
         where = lambda: ", ".join(  # noqa: E731
             f"seed {self.seeds[s]} level {c.level} ({c.name})"
             for s, c in ((s, self.stage_of(s).plan(st, s)) for s in training))
-        # an accelerator's compile beside the level chunk's, a CPU's after it
+        # compiled beside the level chunk's, or after it where the ahead says so
         # (``smjax.train.ahead``; ``rehearse_changes`` says why)
         beside = self.ahead.from_start
         if beside:
