@@ -15,8 +15,9 @@ A pass of the loop takes one block on a CPU and several at once on an accelerato
 (``blocks_per_step``): a CPU pays for the work, an accelerator for each pass's kernel
 launches (benchmarks/RESULTS.md, "The cost of a joint update").
 
-Why blocks and not ``jax.lax.ragged_dot``: on XLA:CPU a ragged product over 5 groups
-takes longer than the dense product of every row with every group's weights.
+Why blocks and not ``jax.lax.ragged_dot``: seed-vmapped, a ragged product over 5 groups
+takes longer than the dense product of every row with every group's weights, on XLA:CPU
+and on a GPU alike (benchmarks/grouped_layers.py).
 """
 from __future__ import annotations
 
