@@ -157,3 +157,38 @@ def test_a_cpu_compiles_ahead_from_the_start_on_one_thread():
     # one thread beside the main thread's small programs (a second makes a run slower)
     ahead = CompileAhead.for_backend()
     assert (ahead.threads, ahead.from_start) == (1, True)
+
+
+@pytest.mark.parametrize("threads,beside", [(1, False), (3, True)], ids=["one", "three"])
+def test_where_the_level_chunk_compiles_on_the_main_thread_one_thread_waits_for_it(
+        monkeypatch, threads, beside):
+    # a trainer whose level chunk is not compiled ahead (built without an ahead, as on a
+    # mesh) compiles it where it first runs: an ahead of one thread queues the rest after
+    # that compile, with the level change rehearsed first; one with threads to spare
+    # compiles them beside it
+    from smjax.agents import make_agent
+    from smjax.train.engine import Engine
+    from smjax.train.loop import HierarchyTrainer
+    from smjax.train.plans import plan_levels
+
+    monkeypatch.setattr(CompileAhead, "for_backend",
+                        classmethod(lambda cls: cls(threads, enabled=True, from_start=True)))
+    env, params = make_keydoor()
+    h = env.hierarchies()["paper"]
+    cfg = TrainConfig(**JOINT_SMALL)
+    trainer = HierarchyTrainer(Engine(env, params, h, make_agent("ppo"), cfg),
+                               plan_levels(h, "top-down"), [0], hooks=[])
+    assert trainer.runner.level_program is None  # nothing submitted at construction
+    seen, rehearsed, real_run = {}, [], trainer.runner.run
+
+    def level_chunk(*args, **kwargs):
+        seen["rest submitted first"] = trainer.ahead_rest
+        return real_run(*args, **kwargs)
+
+    monkeypatch.setattr(trainer.runner, "run", level_chunk)
+    monkeypatch.setattr(trainer, "rehearse_changes", lambda: rehearsed.append(True))
+    trainer.start([0])
+    trainer.chunk([0], trainer.controls())
+    trainer.ahead.close()
+    assert seen == {"rest submitted first": beside}
+    assert trainer.ahead_rest and bool(rehearsed) is not beside

@@ -292,7 +292,9 @@ def minibatch_source(traj: Transition, fields: tuple, memory: int):
     ``take(x, idx)``, and its decision weights ``weight_of(w, real)`` without padding."""
     num_ticks, num_envs = traj.reward.shape[:2]
     num_items = num_ticks * num_envs
-    obs = flatten_obs(traj.obs, batch_dims=2)
+    # in the rollout's own dtype: a minibatch casts its rows to float32 once taken
+    # (``as_float``), so its gather reads a uint8 observation's bytes, not 4x as many
+    obs = traj.obs.reshape((num_ticks, num_envs, -1))
     if memory:  # the unroll also needs the memory, decided and done of every tick
         obs = (obs, traj.hidden.astype(jnp.float32), traj.decision.astype(bool),
                traj.done.astype(bool))
@@ -305,6 +307,14 @@ def minibatch_source(traj: Transition, fields: tuple, memory: int):
         take = lambda x, idx: x[idx]  # noqa: E731
         weight_of = lambda w, real: w & real  # noqa: E731
     return data, take, weight_of
+
+
+def as_float(obs):
+    """A minibatch's observations (``minibatch_source``'s, or with a memory the tuple
+    they lead) as the networks take them: float32."""
+    if isinstance(obs, tuple):
+        return (obs[0].astype(jnp.float32),) + obs[1:]
+    return obs.astype(jnp.float32)
 
 
 def ppo_update(config: PPOConfig, network_for, optimizer, state: PolicyGradientState,
@@ -322,7 +332,7 @@ def ppo_update(config: PPOConfig, network_for, optimizer, state: PolicyGradientS
         params, opt_state, grad_steps, stopped = carry
         idx, real = mb
         batch = jax.tree.map(lambda x: take(x, idx), data)
-        batch = batch[:-1] + (weight_of(batch[-1], real),)
+        batch = (as_float(batch[0]),) + batch[1:-1] + (weight_of(batch[-1], real),)
         (total, aux), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, state.hp)
         updates, new_opt_state = optimizer.update(grads, opt_state, params)
         updates = scale_by_lr(updates, state.hp["learning_rate"])

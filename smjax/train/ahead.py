@@ -89,8 +89,9 @@ class CompileAhead:
 
     def __init__(self, threads: int = 1, enabled: bool | None = None, from_start: bool = False):
         """``from_start``: the trainer submits its level chunk as soon as it knows the
-        shapes, to compile beside its small programs (otherwise the level chunk compiles
-        where it first runs, and the rest after it)."""
+        shapes, to compile beside its small programs (otherwise, or where the trainer
+        cannot, the level chunk compiles where it first runs, and the rest beside it or
+        after it: ``beside_main``)."""
         if enabled is None:
             enabled = (os.environ.get("SMJAX_COMPILE_AHEAD", "1").strip().lower()
                        not in ("0", "false", "off", "no") and jax.process_count() == 1)
@@ -106,6 +107,14 @@ class CompileAhead:
         accelerator three (the level chunk, then the gate's and joint fine-tuning's
         programs at once)."""
         return cls(1 if jax.default_backend() == "cpu" else 3, from_start=True)
+
+    @property
+    def beside_main(self) -> bool:
+        """Whether programs compile here while the main thread compiles its own (a level
+        chunk not compiled ahead): with threads to spare (an accelerator's host). One
+        thread (a CPU's) waits until the main thread's compile is done: the two would
+        share the cores the chunks train on."""
+        return self.threads > 1
 
     def submit(self, label: str, compile_fn: Callable[[Any], Any], args) -> Pending | None:
         """``compile_fn(abstract(args))`` on a thread (None where compiling ahead is off);

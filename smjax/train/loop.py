@@ -218,9 +218,9 @@ class HierarchyTrainer:
         where = lambda: ", ".join(  # noqa: E731
             f"seed {self.seeds[s]} level {c.level} ({c.name})"
             for s, c in ((s, self.stage_of(s).plan(st, s)) for s in training))
-        # compiled beside the level chunk's, or after it where the ahead says so
-        # (``smjax.train.ahead``; ``rehearse_changes`` says why)
-        beside = self.ahead.from_start
+        # where the level chunk compiles here, the rest compile beside it or after it, as
+        # the ahead says (``CompileAhead.beside_main``; ``rehearse_changes`` says why)
+        beside = self.ahead.beside_main
         if beside:
             self.compile_ahead(controls)
         out, compile_s = self.runner.run(
@@ -238,7 +238,7 @@ class HierarchyTrainer:
         if self.ahead_rest:
             return
         st, ahead, self.ahead_rest = self.state, self.ahead, True
-        if ahead.on and shapes is None and not ahead.from_start:
+        if ahead.on and shapes is None and not ahead.beside_main:
             self.rehearse_changes()
         a = self.arrays if shapes is None else shapes
         if any(self.levels.holds(st, s) for s in self.training()):
