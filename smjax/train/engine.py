@@ -21,12 +21,13 @@ from smjax.core.env import over_seeds, select_tree
 from smjax.options.bank import frozen_temperature
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
-    EVAL_TEMPERATURES, early_stop_bounds, eval_temperatures, seed_batched_episodes)
+    EVAL_TEMPERATURES, SEED_AXES, early_stop_bounds, eval_temperatures, seed_batched_episodes)
 from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
 from smjax.train.ahead import CompileAhead
 from smjax.train.config import TrainConfig
 from smjax.train.episode_calls import EpisodeCalls
 from smjax.train.program_cache import SavedOnFirstCall, compile_program
+from smjax.train.seed_threads import ALL_SEED_AXES, SeedGroups, thread_count
 from smjax.train.seed_arrays import finite_flag
 
 
@@ -86,6 +87,8 @@ class Engine:
         # there a seed's work ends with its own, and an idle seed costs nothing
         self.seed_by_seed = jax.default_backend() == "cpu" and jax.device_count() == 1
         seeds = functools.partial(over_seeds, one_after_another=self.seed_by_seed)
+        # and there the chunks and episodes run groups of seeds on threads of their own
+        self.seed_threads = thread_count(self.seed_by_seed)
         self.chunk = jax.jit(seeds(self.seed_chunk), donate_argnums=(0,))
         self.joint_chunk = jax.jit(seeds(self._joint_chunk), donate_argnums=(0,))
         # the gate's and the evaluation's episodes, one program
@@ -109,11 +112,19 @@ class Engine:
         # the same episodes for a new learner (a fine-tuning turn's): leading axis S
         self.hand_over = jax.jit(jax.vmap(self.runner.hand_over))
 
-    def compile(self, name: str, jitted, args: tuple, static: tuple = (), donate: tuple = ()):
+    def compile(self, name: str, jitted, args: tuple, static: tuple = (), donate: tuple = (),
+                seed_axes: tuple | None = ALL_SEED_AXES):
         """``jitted`` compiled for ``args``, without tracing where an earlier run saved the
         same program and ``program_identity`` names everything it depends on
-        (:mod:`smjax.train.program_cache`)."""
-        return compile_program(jitted, args, name, self.program_identity, static, donate)
+        (:mod:`smjax.train.program_cache`); where seeds run in groups on threads
+        (:mod:`smjax.train.seed_threads`; ``seed_axes``: which arguments have a seed axis),
+        compiled for one group and called on each."""
+        groups = SeedGroups.for_program(self.seed_threads, args, seed_axes)
+        if groups is None:
+            return compile_program(jitted, args, name, self.program_identity, static, donate)
+        program = compile_program(jitted, groups.shapes(args), name, self.program_identity,
+                                  static, donate)
+        return groups.program(program)
 
     @property
     def success_bounded(self) -> bool:
@@ -283,7 +294,8 @@ class Engine:
 
     def compile_episodes(self, args: tuple, num_envs: int):
         """The episodes program compiled for ``args`` (``gate_args`` or ``evaluate_args``)."""
-        return self.compile(f"episodes-{num_envs}", self.episodes, args, static=(num_envs,))
+        return self.compile(f"episodes-{num_envs}", self.episodes, args, static=(num_envs,),
+                            seed_axes=SEED_AXES)
 
     def _seed_temperatures(self, policy: str, num_seeds: int) -> jax.Array:
         """float32 [S, O]: each option's temperature under ``policy``, for every seed (a
