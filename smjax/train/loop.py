@@ -335,4 +335,5 @@ class HierarchyTrainer:
                 "eval_policy": self.engine.frozen_policy,
                 "finetune": st.finetune_record() if self.finetune else None,
                 "bank": a.bank, "learned": a.learned, "eval_keys": eval_keys,
-                "wall_seconds": st.wall_seconds, "compile_seconds": st.compile_seconds}
+                "wall_seconds": st.wall_seconds, "compile_seconds": st.compile_seconds,
+                "seed_threads": min(self.engine.seed_threads, len(self.slots))}

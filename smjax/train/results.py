@@ -67,6 +67,9 @@ def build_results(env_name: str, method: str, algo: str, seeds: list[int], thres
         "wall_seconds": raw["wall_seconds"],
         "compile_seconds": raw["compile_seconds"],
         "device": jax.devices()[0].platform,
+        # threads the seeds' groups ran on (smjax.train.seed_threads): the same numbers
+        # with any count, a different wall time
+        "seed_threads": raw.get("seed_threads", 1),
         "jax_version": jax.__version__,
         "smjax_version": smjax_version(),
         "config": config,

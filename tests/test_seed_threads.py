@@ -1,0 +1,77 @@
+"""Seeds in groups on threads (a CPU): the same numbers as one program over every seed."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hier_env import make_keydoor
+
+from smjax.train import TrainConfig
+from smjax.train.run import run
+from smjax.train.seed_threads import SeedGroups, thread_count
+
+CFG = TrainConfig(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
+                  success_window=64, gate_envs=32, eval_envs=32, finetune="on",
+                  finetune_max_episodes=300)
+
+
+def test_a_run_in_seed_groups_equals_one_program_over_every_seed(monkeypatch):
+    calls = []
+    grouped_run = SeedGroups.run
+
+    def counted(self, compiled, args):
+        calls.append(self.groups)
+        return grouped_run(self, compiled, args)
+
+    monkeypatch.setattr(SeedGroups, "run", counted)
+    monkeypatch.setenv("SMJAX_SEED_THREADS", "1")
+    one = run(make_keydoor(), CFG, [0, 1, 2], progress=False)
+    assert calls == []
+    # three seeds in two groups: the second padded with a copy of the last seed
+    monkeypatch.setenv("SMJAX_SEED_THREADS", "2")
+    grouped = run(make_keydoor(), CFG, [0, 1, 2], progress=False)
+    assert calls and set(calls) == {2}
+    assert one["finetune"]["episodes"][0] > 0  # the joint chunk ran too
+    times = ("wall_seconds", "compile_seconds", "_raw", "seed_threads")
+    assert {k: v for k, v in grouped.items() if k not in times} == {
+        k: v for k, v in one.items() if k not in times}
+    assert (one["seed_threads"], grouped["seed_threads"]) == (1, 2)
+
+
+def _per_seed_program(x, shared, y):
+    return {"sum": x * 2 + shared, "rows": y.sum(axis=1)}
+
+
+@pytest.mark.parametrize("seeds, groups", [(4, 2), (5, 2), (5, 3), (2, 2)])
+def test_groups_split_and_join_every_seed_in_place(seeds, groups):
+    x = jnp.arange(seeds, dtype=jnp.float32)
+    y = jnp.arange(seeds * 3, dtype=jnp.int32).reshape(seeds, 3)
+    shared = jnp.float32(10.0)
+    args = (x, shared, y)
+    axes = (0, None, 0)
+    g = SeedGroups.for_program(groups, args, axes)
+    assert g is not None and g.groups == groups
+    shapes = g.shapes(args)
+    assert shapes[0].shape == (g.size,) and shapes[1] is shared and shapes[2].shape == (g.size, 3)
+    compiled = jax.jit(_per_seed_program).lower(*shapes).compile()
+    out = g.program(compiled)(*args)
+    want = _per_seed_program(*args)
+    for k in want:
+        np.testing.assert_array_equal(np.asarray(out[k]), np.asarray(want[k]))
+        assert out[k].shape[0] == seeds
+
+
+def test_one_thread_or_one_seed_runs_one_program():
+    args = (jnp.zeros((3, 2)),)
+    assert SeedGroups.for_program(1, args) is None
+    assert SeedGroups.for_program(4, (jnp.zeros((1, 2)),)) is None
+    assert SeedGroups.for_program(4, args).groups == 3  # never more groups than seeds
+
+
+def test_the_thread_setting_is_checked(monkeypatch):
+    assert thread_count(False) == 1  # seeds side by side: nothing to split
+    monkeypatch.setenv("SMJAX_SEED_THREADS", "3")
+    assert thread_count(True) == 3
+    for bad in ("two", "0", "-1"):
+        monkeypatch.setenv("SMJAX_SEED_THREADS", bad)
+        with pytest.raises(ValueError, match="SMJAX_SEED_THREADS"):
+            thread_count(True)
