@@ -65,6 +65,9 @@ def test_one_thread_or_one_seed_runs_one_program():
     assert SeedGroups.for_program(1, args) is None
     assert SeedGroups.for_program(4, (jnp.zeros((1, 2)),)) is None
     assert SeedGroups.for_program(4, args).groups == 3  # never more groups than seeds
+    # no group of copies alone: 10 seeds on 8 threads are 5 groups of 2
+    ten = SeedGroups.for_program(8, (jnp.zeros((10, 2)),))
+    assert (ten.groups, ten.size) == (5, 2)
 
 
 def test_the_thread_setting_is_checked(monkeypatch):

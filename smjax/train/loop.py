@@ -43,6 +43,7 @@ from smjax.train.seed_arrays import (  # noqa: F401 - NonFiniteError re-exported
 )
 from smjax.train.sharding import seed_sharding, training_mesh
 from smjax.train.slots import Slots
+from smjax.train.seed_threads import group_count
 from smjax.train.stages import ChunkOut, Ends, Scalar, SeedControls, Stage
 from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 
@@ -336,4 +337,4 @@ class HierarchyTrainer:
                 "finetune": st.finetune_record() if self.finetune else None,
                 "bank": a.bank, "learned": a.learned, "eval_keys": eval_keys,
                 "wall_seconds": st.wall_seconds, "compile_seconds": st.compile_seconds,
-                "seed_threads": min(self.engine.seed_threads, len(self.slots))}
+                "seed_threads": group_count(self.engine.seed_threads, len(self.slots))}

@@ -45,6 +45,13 @@ def thread_count(one_after_another: bool) -> int:
     return len(cores) if cores else (os.cpu_count() or 1)
 
 
+def group_count(threads: int, seeds: int) -> int:
+    """Groups of ``seeds`` on ``threads``: as many as the threads, but none of copies alone
+    (10 seeds on 8 threads are 5 groups of 2)."""
+    size = -(-seeds // max(1, threads))
+    return -(-seeds // size)
+
+
 class SeedGroups:
     """``seeds`` seeds dealt into ``groups`` groups of ``size`` consecutive seeds (the last
     padded with copies of the last seed, whose results are dropped). ``axes``: per
@@ -62,7 +69,7 @@ class SeedGroups:
         """The groups for a program's ``args`` (arrays or shapes), or None where one program
         over every seed runs as well (one thread, or one seed)."""
         seeds, weak = _seed_count(args, axes)
-        groups = min(threads, seeds)
+        groups = group_count(threads, seeds)
         # a weakly typed input would come back strongly typed from the host copy
         return cls(seeds, groups, axes) if groups > 1 and not weak else None
 
