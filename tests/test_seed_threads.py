@@ -78,3 +78,22 @@ def test_the_thread_setting_is_checked(monkeypatch):
         monkeypatch.setenv("SMJAX_SEED_THREADS", bad)
         with pytest.raises(ValueError, match="SMJAX_SEED_THREADS"):
             thread_count(True)
+
+
+def test_a_group_of_skipped_seeds_alone_does_not_run():
+    x = jnp.arange(4, dtype=jnp.float32)
+    skip = jnp.asarray([True, True, False, True])
+    args = (x, skip)
+    g = SeedGroups.for_program(2, args, (0, 0), skip=1)
+    compiled = jax.jit(lambda v, s: {"twice": v * 2}).lower(*g.shapes(args)).compile()
+    calls = []
+
+    def counted(*a):
+        calls.append(a)
+        return compiled(*a)
+
+    out = g.program(counted)(*args)
+    assert len(calls) == 1  # only the group holding seed 2
+    np.testing.assert_array_equal(np.asarray(out["twice"]), [0.0, 0.0, 4.0, 6.0])
+    out = g.program(counted)(x, jnp.ones(4, bool))  # none due: one group runs, for the shapes
+    assert len(calls) == 2 and out["twice"].shape == (4,)

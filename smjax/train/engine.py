@@ -21,7 +21,7 @@ from smjax.core.env import over_seeds, select_tree
 from smjax.options.bank import frozen_temperature
 from smjax.options.hierarchy import Hierarchy
 from smjax.options.episodes import (  # noqa: F401 - EVAL_TEMPERATURES re-exported
-    EVAL_TEMPERATURES, SEED_AXES, early_stop_bounds, eval_temperatures, seed_batched_episodes)
+    EVAL_TEMPERATURES, SEED_AXES, SKIP, early_stop_bounds, eval_temperatures, seed_batched_episodes)
 from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner, TickStats
 from smjax.train.ahead import CompileAhead
 from smjax.train.config import TrainConfig
@@ -113,13 +113,13 @@ class Engine:
         self.hand_over = jax.jit(jax.vmap(self.runner.hand_over))
 
     def compile(self, name: str, jitted, args: tuple, static: tuple = (), donate: tuple = (),
-                seed_axes: tuple | None = ALL_SEED_AXES):
+                seed_axes: tuple | None = ALL_SEED_AXES, skip: int | None = None):
         """``jitted`` compiled for ``args``, without tracing where an earlier run saved the
         same program and ``program_identity`` names everything it depends on
         (:mod:`smjax.train.program_cache`); where seeds run in groups on threads
-        (:mod:`smjax.train.seed_threads`; ``seed_axes``: which arguments have a seed axis),
-        compiled for one group and called on each."""
-        groups = SeedGroups.for_program(self.seed_threads, args, seed_axes)
+        (:mod:`smjax.train.seed_threads`; ``seed_axes``: which arguments have a seed axis;
+        ``skip``: which marks seeds not due), compiled for one group and called on each."""
+        groups = SeedGroups.for_program(self.seed_threads, args, seed_axes, skip)
         if groups is None:
             return compile_program(jitted, args, name, self.program_identity, static, donate)
         program = compile_program(jitted, groups.shapes(args), name, self.program_identity,
@@ -295,7 +295,7 @@ class Engine:
     def compile_episodes(self, args: tuple, num_envs: int):
         """The episodes program compiled for ``args`` (``gate_args`` or ``evaluate_args``)."""
         return self.compile(f"episodes-{num_envs}", self.episodes, args, static=(num_envs,),
-                            seed_axes=SEED_AXES)
+                            seed_axes=SEED_AXES, skip=SKIP)
 
     def _seed_temperatures(self, policy: str, num_seeds: int) -> jax.Array:
         """float32 [S, O]: each option's temperature under ``policy``, for every seed (a

@@ -55,23 +55,28 @@ def group_count(threads: int, seeds: int) -> int:
 class SeedGroups:
     """``seeds`` seeds dealt into ``groups`` groups of ``size`` consecutive seeds (the last
     padded with copies of the last seed, whose results are dropped). ``axes``: per
-    argument, 0 (a leading seed axis) or None (shared by every seed); None: all 0."""
+    argument, 0 (a leading seed axis) or None (shared by every seed); None: all 0.
+    ``skip``: the position of a per-seed bool argument that marks seeds whose results are
+    meaningless (an episodes program's seeds not due): a group of such seeds alone is not
+    run, and its results are zeros."""
 
-    def __init__(self, seeds: int, groups: int, axes: tuple | None = ALL_SEED_AXES):
-        self.seeds, self.groups, self.axes = seeds, groups, axes
+    def __init__(self, seeds: int, groups: int, axes: tuple | None = ALL_SEED_AXES,
+                 skip: int | None = None):
+        self.seeds, self.groups, self.axes, self.skip = seeds, groups, axes, skip
         self.size = -(-seeds // groups)
         self.rows = [np.minimum(np.arange(g * self.size, (g + 1) * self.size), seeds - 1)
                      for g in range(groups)]
         self._pool = ThreadPoolExecutor(groups - 1, thread_name_prefix="smjax-seed-group")
 
     @classmethod
-    def for_program(cls, threads: int, args: tuple, axes: tuple | None = ALL_SEED_AXES):
+    def for_program(cls, threads: int, args: tuple, axes: tuple | None = ALL_SEED_AXES,
+                    skip: int | None = None):
         """The groups for a program's ``args`` (arrays or shapes), or None where one program
         over every seed runs as well (one thread, or one seed)."""
         seeds, weak = _seed_count(args, axes)
         groups = group_count(threads, seeds)
         # a weakly typed input would come back strongly typed from the host copy
-        return cls(seeds, groups, axes) if groups > 1 and not weak else None
+        return cls(seeds, groups, axes, skip) if groups > 1 and not weak else None
 
     def _per_seed(self, args: tuple) -> list[bool]:
         return [True] * len(args) if self.axes is None else [a == 0 for a in self.axes]
@@ -85,38 +90,51 @@ class SeedGroups:
         return tuple(jax.tree.map(group, a) if on else a
                      for a, on in zip(args, self._per_seed(args)))
 
-    def split(self, args: tuple) -> list[tuple]:
-        """Each group's arguments, its rows copied into arrays of their own (one transfer
-        for the group)."""
+    def split(self, args: tuple, groups: list[int]) -> list[tuple]:
+        """These groups' arguments, their rows copied into arrays of their own (one transfer
+        a group)."""
         on = self._per_seed(args)
         leaves, tree = jax.tree.flatten(tuple(a for a, o in zip(args, on) if o))
         host = [np.asarray(x) for x in leaves]
         out = []
-        for rows in self.rows:
+        for rows in [self.rows[g] for g in groups]:
             take = (slice(rows[0], rows[0] + self.size) if rows[-1] - rows[0] == self.size - 1
                     else rows)
             group = iter(jax.tree.unflatten(tree, jax.device_put([h[take] for h in host])))
             out.append(tuple(next(group) if o else a for a, o in zip(args, on)))
         return out
 
-    def join(self, results: list):
-        """The groups' results (each with a leading seed axis) as one result over the seeds."""
-        flat = [jax.tree.flatten(r) for r in results]
-        tree = flat[0][1]
-        joined = [np.concatenate([np.asarray(f[0][i]) for f in flat])[: self.seeds]
-                  for i in range(len(flat[0][0]))]
-        return jax.tree.unflatten(tree, jax.device_put(joined))
+    def join(self, results: dict):
+        """The groups' results (group -> result, each with a leading seed axis) as one result
+        over the seeds; zeros for a group not run."""
+        flat = {g: jax.tree.leaves(r) for g, r in results.items()}
+        first = next(iter(results.values()))
+        ran = [np.asarray(x) for x in flat[next(iter(flat))]]
+        joined = [np.concatenate([np.asarray(flat[g][i]) if g in flat else np.zeros_like(x)
+                                  for g in range(self.groups)])[: self.seeds]
+                  for i, x in enumerate(ran)]
+        return jax.tree.unflatten(jax.tree.structure(first), jax.device_put(joined))
+
+    def due(self, args: tuple) -> list[int]:
+        """The groups to run: every one, or (``skip``) those holding a seed not skipped (at
+        least one, for the results' shapes)."""
+        if self.skip is None:
+            return list(range(self.groups))
+        skipped = np.asarray(args[self.skip])
+        return [g for g, rows in enumerate(self.rows) if not skipped[rows].all()] or [0]
 
     def program(self, compiled) -> "GroupedProgram":
         """``compiled`` (a program over one group) called over every seed."""
         return GroupedProgram(self, compiled)
 
     def run(self, compiled, args: tuple):
-        """``compiled`` on every group, the first on this thread, the others on the pool."""
-        groups = self.split(args)
+        """``compiled`` on every group due, the first on this thread, the others on the
+        pool."""
+        due = self.due(args)
+        groups = self.split(args, due)
         others = [self._pool.submit(_ready, compiled, g) for g in groups[1:]]
         results = [_ready(compiled, groups[0])] + [f.result() for f in others]
-        return self.join(results)
+        return self.join(dict(zip(due, results)))
 
 
 class GroupedProgram:
