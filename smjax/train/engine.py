@@ -27,8 +27,8 @@ from smjax.train.ahead import CompileAhead
 from smjax.train.config import TrainConfig
 from smjax.train.episode_calls import EpisodeCalls
 from smjax.train.program_cache import SavedOnFirstCall, compile_program
-from smjax.train.seed_threads import ALL_SEED_AXES, SeedGroups, thread_count
 from smjax.train.seed_arrays import finite_flag
+from smjax.train.seed_threads import ALL_SEED_AXES, SeedGroups, thread_count
 
 
 def _same(x):

@@ -41,9 +41,9 @@ from smjax.train.progress import ProgressBar
 from smjax.train.seed_arrays import (  # noqa: F401 - NonFiniteError re-exported
     NonFiniteError, final_evaluation_keys, select_seeds, split_seeds,
 )
+from smjax.train.seed_threads import group_count
 from smjax.train.sharding import seed_sharding, training_mesh
 from smjax.train.slots import Slots
-from smjax.train.seed_threads import group_count
 from smjax.train.stages import ChunkOut, Ends, Scalar, SeedControls, Stage
 from smjax.train.state import SuccessWindow, TrainArrays, TrainerState
 
