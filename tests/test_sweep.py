@@ -21,7 +21,9 @@ SWEEP = {"agent.learning_rate": LRS}
 
 
 def _numbers(res: dict) -> dict:
-    return {k: v for k, v in res.items() if k not in ("wall_seconds", "compile_seconds", "_raw")}
+    # seed_threads: how many groups ran (a sweep has more slots than its point alone)
+    times = ("wall_seconds", "compile_seconds", "_raw", "seed_threads")
+    return {k: v for k, v in res.items() if k not in times}
 
 
 @pytest.fixture
