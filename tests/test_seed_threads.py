@@ -3,11 +3,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from hier_env import make_keydoor
 
 from smjax.train import TrainConfig
 from smjax.train.run import run
-from smjax.train.seed_threads import SeedGroups, thread_count
+from smjax.train.seed_threads import Busy, SeedGroups, group_count, thread_count
 
 CFG = TrainConfig(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
                   success_window=64, gate_envs=32, eval_envs=32, finetune="on",
@@ -84,7 +86,7 @@ def test_a_group_of_skipped_seeds_alone_does_not_run():
     x = jnp.arange(4, dtype=jnp.float32)
     skip = jnp.asarray([True, True, False, True])
     args = (x, skip)
-    g = SeedGroups.for_program(2, args, (0, 0), skip=1)
+    g = SeedGroups.for_program(2, args, (0, 0), busy=Busy(1, False, droppable=True))
     compiled = jax.jit(lambda v, s: {"twice": v * 2}).lower(*g.shapes(args)).compile()
     calls = []
 
@@ -94,6 +96,26 @@ def test_a_group_of_skipped_seeds_alone_does_not_run():
 
     out = g.program(counted)(*args)
     assert len(calls) == 1  # only the group holding seed 2
-    np.testing.assert_array_equal(np.asarray(out["twice"]), [0.0, 0.0, 4.0, 6.0])
+    assert float(out["twice"][2]) == 4.0  # the others' results are meaningless
     out = g.program(counted)(x, jnp.ones(4, bool))  # none due: one group runs, for the shapes
     assert len(calls) == 2 and out["twice"].shape == (4,)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.booleans(), min_size=2, max_size=11), st.integers(2, 5))
+def test_busy_seeds_are_dealt_evenly_and_every_seed_comes_back_in_place(busy, threads):
+    seeds = len(busy)
+    args = (np.arange(seeds, dtype=np.float32), np.asarray(busy))
+    g = SeedGroups(seeds, group_count(threads, seeds), (0, 0), Busy(1, True, droppable=False))
+    rows, has_busy = g.deal(args)
+    assert all(len(r) == g.size for r in rows)
+    assert sorted(set(np.concatenate(rows).tolist())) == list(range(seeds))
+    counts = [int(np.asarray(busy)[r].sum()) for r in rows]
+    # a padding copy of a busy seed only where every seed is busy
+    assert max(counts) - min(counts) <= (1 if not all(busy) else 2)
+    assert sum(counts) == sum(busy) + (g.groups * g.size - seeds if all(busy) else 0)
+    assert has_busy == [c > 0 for c in counts]
+    # every group runs (an idle seed's results are its state), and each comes back in place
+    out = g.program(lambda x, b: {"x": x + 1, "b": b})(*args)
+    np.testing.assert_array_equal(np.asarray(out["x"]), args[0] + 1)
+    np.testing.assert_array_equal(np.asarray(out["b"]), args[1])

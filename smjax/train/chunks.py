@@ -15,7 +15,7 @@ import numpy as np
 
 from smjax.train import distributed as dist
 from smjax.train.ahead import CompileAhead, arguments, resolve
-from smjax.train.engine import ChunkControls
+from smjax.train.engine import CHUNK_BUSY, ChunkControls
 from smjax.train.seed_arrays import NonFiniteError
 from smjax.train.slots import Slots
 from smjax.train.stages import ChunkOut, SeedControls
@@ -91,7 +91,8 @@ class ChunkRunner:
         return ChunkOut(stats, windows, metrics), compile_s
 
     def _compile_level(self, args: tuple):
-        return self.engine.compile("chunk", self.engine.chunk, args, donate=(0,))
+        return self.engine.compile("chunk", self.engine.chunk, args, donate=(0,),
+                                   busy=CHUNK_BUSY)
 
     def joint_args(self, seeds: list[int], side_cost, gammas, sizes, a=None) -> tuple:
         """Joint fine-tuning's chunk's arguments: these seeds run, the others keep their
@@ -112,7 +113,8 @@ class ChunkRunner:
                                               arguments(make, a))
 
     def _compile_joint(self, args: tuple):
-        return self.engine.compile("joint_chunk", self.engine.joint_chunk, args, donate=(0,))
+        return self.engine.compile("joint_chunk", self.engine.joint_chunk, args, donate=(0,),
+                                   busy=CHUNK_BUSY)
 
     def joint(self, seeds: list[int], side_cost, gammas, sizes, describe):
         """Joint fine-tuning's chunk for these seeds (the others keep their state)."""

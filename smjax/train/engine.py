@@ -28,7 +28,11 @@ from smjax.train.config import TrainConfig
 from smjax.train.episode_calls import EpisodeCalls
 from smjax.train.program_cache import SavedOnFirstCall, compile_program
 from smjax.train.seed_arrays import finite_flag
-from smjax.train.seed_threads import ALL_SEED_AXES, SeedGroups, thread_count
+from smjax.train.seed_threads import ALL_SEED_AXES, Busy, SeedGroups, thread_count
+
+
+# a chunk's seeds that train: its ``active`` argument (an idle seed keeps its state)
+CHUNK_BUSY = Busy(position=1, when=True, droppable=False)
 
 
 def _same(x):
@@ -113,13 +117,14 @@ class Engine:
         self.hand_over = jax.jit(jax.vmap(self.runner.hand_over))
 
     def compile(self, name: str, jitted, args: tuple, static: tuple = (), donate: tuple = (),
-                seed_axes: tuple | None = ALL_SEED_AXES, skip: int | None = None):
+                seed_axes: tuple | None = ALL_SEED_AXES, busy: Busy | None = None):
         """``jitted`` compiled for ``args``, without tracing where an earlier run saved the
         same program and ``program_identity`` names everything it depends on
         (:mod:`smjax.train.program_cache`); where seeds run in groups on threads
         (:mod:`smjax.train.seed_threads`; ``seed_axes``: which arguments have a seed axis;
-        ``skip``: which marks seeds not due), compiled for one group and called on each."""
-        groups = SeedGroups.for_program(self.seed_threads, args, seed_axes, skip)
+        ``busy``: which seeds of a call have work), compiled for one group and called on
+        each."""
+        groups = SeedGroups.for_program(self.seed_threads, args, seed_axes, busy)
         if groups is None:
             return compile_program(jitted, args, name, self.program_identity, static, donate)
         program = compile_program(jitted, groups.shapes(args), name, self.program_identity,
@@ -295,7 +300,7 @@ class Engine:
     def compile_episodes(self, args: tuple, num_envs: int):
         """The episodes program compiled for ``args`` (``gate_args`` or ``evaluate_args``)."""
         return self.compile(f"episodes-{num_envs}", self.episodes, args, static=(num_envs,),
-                            seed_axes=SEED_AXES, skip=SKIP)
+                            seed_axes=SEED_AXES, busy=Busy(SKIP, False, droppable=True))
 
     def _seed_temperatures(self, policy: str, num_seeds: int) -> jax.Array:
         """float32 [S, O]: each option's temperature under ``policy``, for every seed (a

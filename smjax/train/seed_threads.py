@@ -11,6 +11,10 @@ group from its own thread and copies the results back in place: the same chunk o
 quick start takes 0.21 s instead of 0.28 s. A seed's numbers do not change: each group
 runs the very loop body the whole batch would, on that seed's own inputs.
 
+Seeds finish their levels at their own pace, so a call's seeds with work (``Busy``: a
+chunk's active ones, a gate's due ones) are dealt evenly over the groups at each call; an
+idle seed in a group costs next to nothing (a ``cond`` passes its state through).
+
 Only where seeds run one after another on one CPU device of one process (elsewhere they
 run side by side, ``vmap``, already). ``SMJAX_SEED_THREADS`` sets the number of threads
 (``1``: one program for every seed, as before); unset, the cores this process may use.
@@ -19,6 +23,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 
 import jax
 import numpy as np
@@ -52,31 +57,38 @@ def group_count(threads: int, seeds: int) -> int:
     return -(-seeds // size)
 
 
+class Busy(NamedTuple):
+    """Which seeds of a call have work: those whose per-seed bool argument at ``position``
+    equals ``when``. ``droppable``: an idle seed's results are meaningless (an episodes
+    program's seeds not due), so a group of idle seeds alone is not run and its results
+    are zeros; otherwise (a chunk's idle seeds keep their state) every group runs."""
+    position: int
+    when: bool
+    droppable: bool
+
+
 class SeedGroups:
-    """``seeds`` seeds dealt into ``groups`` groups of ``size`` consecutive seeds (the last
-    padded with copies of the last seed, whose results are dropped). ``axes``: per
-    argument, 0 (a leading seed axis) or None (shared by every seed); None: all 0.
-    ``skip``: the position of a per-seed bool argument that marks seeds whose results are
-    meaningless (an episodes program's seeds not due): a group of such seeds alone is not
-    run, and its results are zeros."""
+    """``seeds`` seeds dealt into ``groups`` groups of ``size`` (``groups * size - seeds``
+    padding rows, whose results are dropped). ``axes``: per argument, 0 (a leading seed
+    axis) or None (shared by every seed); None: all 0. ``busy``: which seeds of a call have
+    work (``Busy``); each call deals them evenly over the groups, so that no thread waits on
+    another holding more of them (seeds finish their levels at their own pace)."""
 
     def __init__(self, seeds: int, groups: int, axes: tuple | None = ALL_SEED_AXES,
-                 skip: int | None = None):
-        self.seeds, self.groups, self.axes, self.skip = seeds, groups, axes, skip
+                 busy: Busy | None = None):
+        self.seeds, self.groups, self.axes, self.busy = seeds, groups, axes, busy
         self.size = -(-seeds // groups)
-        self.rows = [np.minimum(np.arange(g * self.size, (g + 1) * self.size), seeds - 1)
-                     for g in range(groups)]
         self._pool = ThreadPoolExecutor(groups - 1, thread_name_prefix="smjax-seed-group")
 
     @classmethod
     def for_program(cls, threads: int, args: tuple, axes: tuple | None = ALL_SEED_AXES,
-                    skip: int | None = None):
+                    busy: Busy | None = None):
         """The groups for a program's ``args`` (arrays or shapes), or None where one program
         over every seed runs as well (one thread, or one seed)."""
         seeds, weak = _seed_count(args, axes)
         groups = group_count(threads, seeds)
         # a weakly typed input would come back strongly typed from the host copy
-        return cls(seeds, groups, axes, skip) if groups > 1 and not weak else None
+        return cls(seeds, groups, axes, busy) if groups > 1 and not weak else None
 
     def _per_seed(self, args: tuple) -> list[bool]:
         return [True] * len(args) if self.axes is None else [a == 0 for a in self.axes]
@@ -90,51 +102,60 @@ class SeedGroups:
         return tuple(jax.tree.map(group, a) if on else a
                      for a, on in zip(args, self._per_seed(args)))
 
-    def split(self, args: tuple, groups: list[int]) -> list[tuple]:
-        """These groups' arguments, their rows copied into arrays of their own (one transfer
-        a group)."""
+    def deal(self, args: tuple) -> tuple[list[np.ndarray], list[bool]]:
+        """Each group's rows for a call on ``args``, and whether it holds a busy seed. The
+        busy seeds come first and are dealt in turn, so group sizes in busy seeds differ
+        by one at most; padding repeats an idle seed where there is one (it costs nothing),
+        else the last seed."""
+        if self.busy is None:
+            busy = np.ones(self.seeds, bool)
+        else:
+            busy = np.asarray(args[self.busy.position]) == self.busy.when
+        idle = np.flatnonzero(~busy)
+        order = np.concatenate([np.flatnonzero(busy), idle])
+        pad = idle[-1] if len(idle) else self.seeds - 1
+        order = np.concatenate([order, np.full(self.groups * self.size - self.seeds, pad)])
+        rows = [order[g::self.groups] for g in range(self.groups)]
+        return rows, [bool(busy[r].any()) for r in rows]
+
+    def split(self, args: tuple, rows: list[np.ndarray]) -> list[tuple]:
+        """These rows' arguments, copied into arrays of their own (one transfer a group)."""
         on = self._per_seed(args)
         leaves, tree = jax.tree.flatten(tuple(a for a, o in zip(args, on) if o))
         host = [np.asarray(x) for x in leaves]
         out = []
-        for rows in [self.rows[g] for g in groups]:
-            take = (slice(rows[0], rows[0] + self.size) if rows[-1] - rows[0] == self.size - 1
-                    else rows)
+        for take in rows:
             group = iter(jax.tree.unflatten(tree, jax.device_put([h[take] for h in host])))
             out.append(tuple(next(group) if o else a for a, o in zip(args, on)))
         return out
 
-    def join(self, results: dict):
-        """The groups' results (group -> result, each with a leading seed axis) as one result
-        over the seeds; zeros for a group not run."""
-        flat = {g: jax.tree.leaves(r) for g, r in results.items()}
-        first = next(iter(results.values()))
-        ran = [np.asarray(x) for x in flat[next(iter(flat))]]
-        joined = [np.concatenate([np.asarray(flat[g][i]) if g in flat else np.zeros_like(x)
-                                  for g in range(self.groups)])[: self.seeds]
+    def join(self, rows: list[np.ndarray], results: list):
+        """One result over the seeds from the groups' (``results[g]``: group ``g``'s, with a
+        leading axis in ``rows[g]``'s order; None: not run, zeros)."""
+        first = next(r for r in results if r is not None)
+        ran = [np.asarray(x) for x in jax.tree.leaves(first)]
+        flat = [None if r is None else [np.asarray(x) for x in jax.tree.leaves(r)]
+                for r in results]
+        # where each seed's row lies in the groups' rows laid end to end (its first copy)
+        _, where = np.unique(np.concatenate(rows), return_index=True)
+        joined = [np.concatenate([np.zeros_like(x) if f is None else f[i] for f in flat])[where]
                   for i, x in enumerate(ran)]
         return jax.tree.unflatten(jax.tree.structure(first), jax.device_put(joined))
-
-    def due(self, args: tuple) -> list[int]:
-        """The groups to run: every one, or (``skip``) those holding a seed not skipped (at
-        least one, for the results' shapes)."""
-        if self.skip is None:
-            return list(range(self.groups))
-        skipped = np.asarray(args[self.skip])
-        return [g for g, rows in enumerate(self.rows) if not skipped[rows].all()] or [0]
 
     def program(self, compiled) -> "GroupedProgram":
         """``compiled`` (a program over one group) called over every seed."""
         return GroupedProgram(self, compiled)
 
     def run(self, compiled, args: tuple):
-        """``compiled`` on every group due, the first on this thread, the others on the
-        pool."""
-        due = self.due(args)
-        groups = self.split(args, due)
+        """``compiled`` on every group (but a droppable group of idle seeds alone), the first
+        on this thread, the others on the pool."""
+        rows, has_busy = self.deal(args)
+        due = [g for g in range(self.groups)
+               if has_busy[g] or not (self.busy and self.busy.droppable)] or [0]
+        groups = self.split(args, [rows[g] for g in due])
         others = [self._pool.submit(_ready, compiled, g) for g in groups[1:]]
-        results = [_ready(compiled, groups[0])] + [f.result() for f in others]
-        return self.join(dict(zip(due, results)))
+        ran = dict(zip(due, [_ready(compiled, groups[0])] + [f.result() for f in others]))
+        return self.join(rows, [ran.get(g) for g in range(self.groups)])
 
 
 class GroupedProgram:
