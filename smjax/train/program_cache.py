@@ -69,15 +69,6 @@ def program_key(identity: dict, name: str, args: tuple) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def compile_options() -> dict | None:
-    """XLA options for a run's large programs: on a CPU, LLVM's optimization level 1 (of
-    3; XLA's default is 2). These programs compile about a tenth faster (a level chunk of
-    the quick start 7.4 -> 6.8 s, its episodes program 5.3 -> 4.6 s on 2 cores) and run
-    as fast (benchmarks/RESULTS.md, "LLVM level 1 for the CPU's large programs"); float
-    operations are not reordered at either level, so results are the same bits."""
-    return {"xla_backend_optimization_level": 1} if jax.default_backend() == "cpu" else None
-
-
 def _directory() -> Path | None:
     base = jax.config.jax_compilation_cache_dir
     return Path(base) / "smjax-programs" if base else None
@@ -91,7 +82,7 @@ def compile_program(jitted, args: tuple, name: str, identity: dict | None,
     ``args`` whose buffers the program may reuse, as ``jitted`` declares them."""
     folder = _directory() if identity is not None else None
     if folder is None:
-        return jitted.lower(*args, *static).compile(compile_options())
+        return jitted.lower(*args, *static).compile()
     path = folder / f"{program_key(identity, name, args + static)}.bin"
     leaves, in_tree = jax.tree.flatten(args)
     donated = _donated_leaves(args, donate)
@@ -110,8 +101,7 @@ def compile_program(jitted, args: tuple, name: str, identity: dict | None,
         exported = jax.export.export(jax.jit(flat))(*leaves)
         out_tree = trees[0]
         _save(path, exported, out_tree)
-    compiled = jax.jit(exported.call, donate_argnums=donated).lower(*leaves).compile(
-        compile_options())
+    compiled = jax.jit(exported.call, donate_argnums=donated).lower(*leaves).compile()
     return _Unflattened(compiled, out_tree)
 
 
