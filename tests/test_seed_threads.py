@@ -1,4 +1,6 @@
 """Seeds in groups on threads (a CPU): the same numbers as one program over every seed."""
+import threading
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -8,6 +10,7 @@ from hypothesis import strategies as st
 from hier_env import make_keydoor
 
 from smjax.train import TrainConfig
+from smjax.train.chunks import ChunkRunner
 from smjax.train.run import run
 from smjax.train.seed_threads import Busy, SeedGroups, group_count, thread_count
 
@@ -17,21 +20,30 @@ CFG = TrainConfig(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episod
 
 
 def test_a_run_in_seed_groups_equals_one_program_over_every_seed(monkeypatch):
-    calls = []
-    grouped_run = SeedGroups.run
+    calls, joint_threads = [], []
+    grouped_run, joint_chunk = SeedGroups.run, ChunkRunner.joint
 
     def counted(self, compiled, args):
         calls.append(self.groups)
         return grouped_run(self, compiled, args)
 
+    def joint_on(self, *args):
+        joint_threads.append(threading.current_thread().name)
+        return joint_chunk(self, *args)
+
     monkeypatch.setattr(SeedGroups, "run", counted)
+    monkeypatch.setattr(ChunkRunner, "joint", joint_on)
     monkeypatch.setenv("SMJAX_SEED_THREADS", "1")
     one = run(make_keydoor(), CFG, [0, 1, 2], progress=False)
-    assert calls == []
+    assert calls == [] and joint_threads and all(
+        n == threading.main_thread().name for n in joint_threads)
+    joint_threads.clear()
     # three seeds in two groups: the second padded with a copy of the last seed
     monkeypatch.setenv("SMJAX_SEED_THREADS", "2")
     grouped = run(make_keydoor(), CFG, [0, 1, 2], progress=False)
     assert calls and set(calls) == {2}
+    # a chunk with seeds at a level and seeds in joint fine-tuning ran its programs at once
+    assert any(n.startswith("smjax-joint-chunk") for n in joint_threads)
     assert one["finetune"]["episodes"][0] > 0  # the joint chunk ran too
     times = ("wall_seconds", "compile_seconds", "_raw", "seed_threads")
     assert {k: v for k, v in grouped.items() if k not in times} == {

@@ -7,6 +7,7 @@ joint fine-tuning run ``Engine.joint_chunk``. Each program is compiled once per 
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor, wait
 from typing import Callable
 
 import jax
@@ -16,7 +17,7 @@ import numpy as np
 from smjax.train import distributed as dist
 from smjax.train.ahead import CompileAhead, arguments, resolve
 from smjax.train.engine import CHUNK_BUSY, ChunkControls
-from smjax.train.seed_arrays import NonFiniteError
+from smjax.train.seed_arrays import NonFiniteError, select_seeds
 from smjax.train.slots import Slots
 from smjax.train.stages import ChunkOut, SeedControls
 
@@ -28,6 +29,7 @@ class ChunkRunner:
     def __init__(self, engine, slots: Slots, metrics: bool):
         self.engine, self.slots, self.metrics = engine, slots, metrics
         self.level_program = self.joint_program = None
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="smjax-joint-chunk")
 
     def run(self, controls: list[SeedControls], active: list[bool],
             joint_controls: tuple | None, chunk: int, describe: Callable[[], str]
@@ -35,19 +37,40 @@ class ChunkRunner:
         """Chunk number ``chunk``: the level chunk for the ``active`` seeds whose controls
         are not joint, joint fine-tuning's for those that are (``joint_controls``: its
         per-seed inputs); its outputs and the seconds spent compiling. Non-finite learner
-        parameters raise ``NonFiniteError`` (``describe()``: where the seeds train)."""
+        parameters raise ``NonFiniteError`` (``describe()``: where the seeds train).
+
+        Where seeds run in groups on threads (a CPU), the two programs run at once, so that
+        a core one leaves idle (a seed or two still at a level) serves the other. Each
+        keeps its idle seeds' windows as they were, so each seed's come from the program it
+        ran in: the same arrays as one program after the other."""
         joint = [s for s, (c, on) in enumerate(zip(controls, active)) if on and c.joint]
         level = [on and not c.joint for c, on in zip(controls, active)]
-        compile_s, out = 0.0, None
+        a = self.slots.arrays
+        where = f"chunk {chunk} (joint fine-tuning of seeds {[self.slots.seeds[s] for s in joint]})"
+        tune = lambda a: self.joint(joint, *joint_controls, lambda: where, a)  # noqa: E731
+        beside = (self._pool.submit(tune, a)
+                  if any(level) and joint and self.engine.seed_threads > 1 else None)
+        out, compile_s = None, 0.0
         if any(level):
-            where = lambda: f"chunk {chunk} (training: {describe()})"  # noqa: E731
-            out, compile_s = self.level(controls, level, where)
+            try:
+                out, compile_s, fields = self.level(
+                    controls, level, lambda: f"chunk {chunk} (training: {describe()})", a)
+            finally:
+                if beside is not None and not beside.done():
+                    wait([beside])  # not left running on arrays the caller may discard
+            a = a.replace(**fields)
+        if joint:
+            tuned, seconds, fields = tune(a) if beside is None else beside.result()
+            if beside is not None:  # the other seeds' windows are the level chunk's
+                fields.update(zip(("window", "task_window"), select_seeds(
+                    self.slots.mask(joint), (fields["window"], fields["task_window"]),
+                    (a.window, a.task_window))))
+            a = a.replace(**fields)
+        self.slots.arrays = a
         if not joint:
             return out, compile_s
-        where = f"chunk {chunk} (joint fine-tuning of seeds {[self.slots.seeds[s] for s in joint]})"
-        tuned, seconds = self.joint(joint, *joint_controls, lambda: where)
         if out is None:
-            return tuned, compile_s + seconds
+            return tuned, seconds
         # a seed's rows are zero in the program it did not run in
         add = lambda x, y: x + y  # noqa: E731
         return (out._replace(stats=jax.tree.map(add, out.stats, tuned.stats),
@@ -75,9 +98,9 @@ class ChunkRunner:
             args = self.level_args(controls, [True] * len(controls), shapes)
             self.level_program = ahead.submit("level_chunk", self._compile_level, args)
 
-    def level(self, controls: list[SeedControls], active: list[bool], describe):
-        """The level chunk for the ``active`` seeds (levels and fine-tuning turns)."""
-        a, slots = self.slots.arrays, self.slots
+    def level(self, controls: list[SeedControls], active: list[bool], describe, a):
+        """The level chunk for the ``active`` seeds (levels and fine-tuning turns) on the
+        state ``a``: its outputs, the seconds spent compiling and the state's new fields."""
         args = self.level_args(controls, active, a)
         # one compile serves every level (ids are traced)
         self.level_program, compile_s = resolve(self.level_program, args, self._compile_level)
@@ -87,8 +110,8 @@ class ChunkRunner:
         metrics = float64(dist.gather(metrics)) if self.metrics else None
         if not finite.all():
             raise NonFiniteError(f"non-finite learner parameters in {describe()}")
-        slots.arrays = a.replace(state=state, window=window, task_window=task_window)
-        return ChunkOut(stats, windows, metrics), compile_s
+        return (ChunkOut(stats, windows, metrics), compile_s,
+                dict(state=state, window=window, task_window=task_window))
 
     def _compile_level(self, args: tuple):
         return self.engine.compile("chunk", self.engine.chunk, args, donate=(0,),
@@ -116,21 +139,20 @@ class ChunkRunner:
         return self.engine.compile("joint_chunk", self.engine.joint_chunk, args, donate=(0,),
                                    busy=CHUNK_BUSY)
 
-    def joint(self, seeds: list[int], side_cost, gammas, sizes, describe):
-        """Joint fine-tuning's chunk for these seeds (the others keep their state)."""
-        a, slots = self.slots.arrays, self.slots
-        args = self.joint_args(seeds, side_cost, gammas, sizes)
+    def joint(self, seeds: list[int], side_cost, gammas, sizes, describe, a):
+        """Joint fine-tuning's chunk for these seeds on the state ``a`` (the others keep
+        theirs): its outputs, the seconds spent compiling and the state's new fields."""
+        args = self.joint_args(seeds, side_cost, gammas, sizes, a)
         self.joint_program, compile_s = resolve(self.joint_program, args, self._compile_joint)
         state, stats, metrics, (window, task_window), windows, finite = self.joint_program(*args)
         stats, windows, finite = dist.gather((stats, windows, finite))
         if not finite.all():
             raise NonFiniteError(f"non-finite learner parameters in {describe()}")
-        slots.arrays = a.replace(joint=state, window=window, task_window=task_window)
         out = ChunkOut(stats, windows)
         if self.metrics:  # collectives: every process gathers
             out = out._replace(joint_metrics=float64(dist.gather(metrics)),
                                joint_learned=np.asarray(dist.gather(a.learned)))
-        return out, compile_s
+        return out, compile_s, dict(joint=state, window=window, task_window=task_window)
 
 
 def float64(metrics: dict) -> dict:
