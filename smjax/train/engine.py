@@ -33,6 +33,8 @@ from smjax.train.seed_threads import ALL_SEED_AXES, Busy, SeedGroups, thread_cou
 
 # a chunk's seeds that train: its ``active`` argument (an idle seed keeps its state)
 CHUNK_BUSY = Busy(position=1, when=True, droppable=False)
+# an episodes program's due seeds: not ``skip`` (a skipped seed's results are meaningless)
+EPISODES_BUSY = Busy(position=SKIP, when=False, droppable=True)
 
 
 def _same(x):
@@ -300,7 +302,7 @@ class Engine:
     def compile_episodes(self, args: tuple, num_envs: int):
         """The episodes program compiled for ``args`` (``gate_args`` or ``evaluate_args``)."""
         return self.compile(f"episodes-{num_envs}", self.episodes, args, static=(num_envs,),
-                            seed_axes=SEED_AXES, busy=Busy(SKIP, False, droppable=True))
+                            seed_axes=SEED_AXES, busy=EPISODES_BUSY)
 
     def _seed_temperatures(self, policy: str, num_seeds: int) -> jax.Array:
         """float32 [S, O]: each option's temperature under ``policy``, for every seed (a

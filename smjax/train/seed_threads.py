@@ -133,9 +133,9 @@ class SeedGroups:
         """One result over the seeds from the groups' (``results[g]``: group ``g``'s, with a
         leading axis in ``rows[g]``'s order; None: not run, zeros)."""
         first = next(r for r in results if r is not None)
-        ran = [np.asarray(x) for x in jax.tree.leaves(first)]
         flat = [None if r is None else [np.asarray(x) for x in jax.tree.leaves(r)]
                 for r in results]
+        ran = next(f for f in flat if f is not None)  # the leaves' shapes, for the zeros
         # where each seed's row lies in the groups' rows laid end to end (its first copy)
         _, where = np.unique(np.concatenate(rows), return_index=True)
         joined = [np.concatenate([np.zeros_like(x) if f is None else f[i] for f in flat])[where]
