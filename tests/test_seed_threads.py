@@ -131,3 +131,41 @@ def test_busy_seeds_are_dealt_evenly_and_every_seed_comes_back_in_place(busy, th
     out = g.program(lambda x, b: {"x": x + 1, "b": b})(*args)
     np.testing.assert_array_equal(np.asarray(out["x"]), args[0] + 1)
     np.testing.assert_array_equal(np.asarray(out["b"]), args[1])
+
+
+def test_a_call_on_the_last_calls_arrays_takes_their_groups_and_a_donated_one_is_copied(
+        monkeypatch):
+    seeds = 5
+    x = jnp.arange(seeds, dtype=jnp.float32)
+    bank = jnp.arange(seeds * 2, dtype=jnp.float32).reshape(seeds, 2)
+    g = SeedGroups.for_program(2, (x, bank))
+    # the state is donated, as a chunk's is; the bank only read
+    compiled = jax.jit(lambda v, b: {"x": v + b.sum(1)}, donate_argnums=(0,)).lower(
+        *g.shapes((x, bank))).compile()
+    program = g.program(compiled)
+    reused = []
+    reuse = SeedGroups._reuse
+
+    def spied(self, whole, key):
+        parts = reuse(self, whole, key)
+        reused.append(parts is not None)
+        return parts
+
+    monkeypatch.setattr(SeedGroups, "_reuse", spied)
+    first = program(x, bank)
+    assert reused == [False, False]
+    second = program(first["x"], bank)  # the result joined last call, the bank it read
+    assert reused[2:] == [True, True]
+    np.testing.assert_array_equal(np.asarray(second["x"]), np.asarray(x + 2 * bank.sum(1)))
+    # first["x"]'s groups' arrays went into the second call and were donated there:
+    # a call on it again copies its rows anew, with the same numbers
+    again = program(first["x"], bank)
+    assert reused[4:] == [False, True]
+    np.testing.assert_array_equal(np.asarray(again["x"]), np.asarray(second["x"]))
+    # the same arrays dealt otherwise (another busy set) are copied too
+    other = SeedGroups(seeds, 2, busy=Busy(1, True, droppable=False))
+    flags = jnp.asarray([True, False, False, False, True])
+    kept = jax.jit(lambda v, b: {"v": v + 1, "b": b}).lower(*other.shapes((x, flags))).compile()
+    out = other.program(kept)(x, flags)
+    out = other.program(kept)(out["v"], jnp.asarray([False, True, True, False, False]))
+    np.testing.assert_array_equal(np.asarray(out["v"]), np.asarray(x + 2))

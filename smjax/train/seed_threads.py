@@ -15,6 +15,14 @@ Seeds finish their levels at their own pace, so a call's seeds with work (``Busy
 chunk's active ones, a gate's due ones) are dealt evenly over the groups at each call; an
 idle seed in a group costs next to nothing (a ``cond`` passes its state through).
 
+Copying a chunk's rows out (every seed's learners and environments) costs as much as
+joining them back, and most calls take the arrays the last call joined (a chunk's state)
+or took (the policy bank) with the seeds dealt the same way. So each program keeps the
+groups' arrays of its last call, filed under the whole array they belong to, and a call on
+that very array with the same rows takes them instead of copying (``SeedGroups.split``).
+Arrays are immutable, so a kept part always holds its rows of the whole it is filed under;
+one that a call donated is copied anew.
+
 Only where seeds run one after another on one CPU device of one process (elsewhere they
 run side by side, ``vmap``, already). ``SMJAX_SEED_THREADS`` sets the number of threads
 (``1``: one program for every seed, as before); unset, the cores this process may use.
@@ -79,6 +87,7 @@ class SeedGroups:
         self.seeds, self.groups, self.axes, self.busy = seeds, groups, axes, busy
         self.size = -(-seeds // groups)
         self._pool = ThreadPoolExecutor(groups - 1, thread_name_prefix="smjax-seed-group")
+        self._kept: dict[int, _Kept] = {}  # the last call's groups' arrays, by id of the whole
 
     @classmethod
     def for_program(cls, threads: int, args: tuple, axes: tuple | None = ALL_SEED_AXES,
@@ -118,29 +127,56 @@ class SeedGroups:
         rows = [order[g::self.groups] for g in range(self.groups)]
         return rows, [bool(busy[r].any()) for r in rows]
 
-    def split(self, args: tuple, rows: list[np.ndarray]) -> list[tuple]:
-        """These rows' arguments, copied into arrays of their own (one transfer a group)."""
+    def split(self, args: tuple, rows: list[np.ndarray], kept: dict | None = None
+              ) -> list[tuple]:
+        """These rows' arguments in arrays of their own: the groups' arrays of the last call
+        where an argument is the array they were cut from or joined into (with the same
+        rows), else copies (one transfer a group). ``kept``: files each argument's groups'
+        arrays there, by the whole's id, for the next call."""
         on = self._per_seed(args)
         leaves, tree = jax.tree.flatten(tuple(a for a, o in zip(args, on) if o))
-        host = [np.asarray(x) for x in leaves]
+        key = _rows_key(rows)
+        parts, seen = [], set()
+        for x in leaves:  # a repeated array is copied for its second place (donation)
+            parts.append(None if id(x) in seen else self._reuse(x, key))
+            seen.add(id(x))
+        copy = [i for i, p in enumerate(parts) if p is None]
+        host = [np.asarray(leaves[i]) for i in copy]
+        moved = [jax.device_put([h[take] for h in host]) for take in rows]
+        for n, i in enumerate(copy):
+            parts[i] = [group[n] for group in moved]
+        if kept is not None:
+            _file(kept, leaves, parts, key)
         out = []
-        for take in rows:
-            group = iter(jax.tree.unflatten(tree, jax.device_put([h[take] for h in host])))
+        for g in range(len(rows)):
+            group = iter(jax.tree.unflatten(tree, [p[g] for p in parts]))
             out.append(tuple(next(group) if o else a for a, o in zip(args, on)))
         return out
 
-    def join(self, rows: list[np.ndarray], results: list):
+    def _reuse(self, x, key: bytes) -> list | None:
+        """The last call's groups' arrays of ``x`` for rows ``key``, or None."""
+        kept = self._kept.get(id(x))
+        if (kept is None or kept.whole is not x or kept.rows != key
+                or any(p.is_deleted() for p in kept.parts)):
+            return None
+        return kept.parts
+
+    def join(self, rows: list[np.ndarray], results: list, kept: dict | None = None):
         """One result over the seeds from the groups' (``results[g]``: group ``g``'s, with a
-        leading axis in ``rows[g]``'s order; None: not run, zeros)."""
+        leading axis in ``rows[g]``'s order; None: not run, zeros). ``kept``: files the
+        groups' arrays there, by the joined array's id, where every group ran."""
         first = next(r for r in results if r is not None)
-        flat = [None if r is None else [np.asarray(x) for x in jax.tree.leaves(r)]
-                for r in results]
+        groups = [None if r is None else jax.tree.leaves(r) for r in results]
+        flat = [None if g is None else [np.asarray(x) for x in g] for g in groups]
         ran = next(f for f in flat if f is not None)  # the leaves' shapes, for the zeros
         # where each seed's row lies in the groups' rows laid end to end (its first copy)
         _, where = np.unique(np.concatenate(rows), return_index=True)
-        joined = [np.concatenate([np.zeros_like(x) if f is None else f[i] for f in flat])[where]
-                  for i, x in enumerate(ran)]
-        return jax.tree.unflatten(jax.tree.structure(first), jax.device_put(joined))
+        joined = jax.device_put([
+            np.concatenate([np.zeros_like(x) if f is None else f[i] for f in flat])[where]
+            for i, x in enumerate(ran)])
+        if kept is not None and all(g is not None for g in groups):
+            _file(kept, joined, [list(p) for p in zip(*groups)], _rows_key(rows))
+        return jax.tree.unflatten(jax.tree.structure(first), joined)
 
     def program(self, compiled) -> "GroupedProgram":
         """``compiled`` (a program over one group) called over every seed."""
@@ -152,10 +188,13 @@ class SeedGroups:
         rows, has_busy = self.deal(args)
         due = [g for g in range(self.groups)
                if has_busy[g] or not (self.busy and self.busy.droppable)] or [0]
-        groups = self.split(args, [rows[g] for g in due])
+        kept: dict[int, _Kept] = {}
+        groups = self.split(args, [rows[g] for g in due], kept)
         others = [self._pool.submit(_ready, compiled, g) for g in groups[1:]]
         ran = dict(zip(due, [_ready(compiled, groups[0])] + [f.result() for f in others]))
-        return self.join(rows, [ran.get(g) for g in range(self.groups)])
+        out = self.join(rows, [ran.get(g) for g in range(self.groups)], kept)
+        self._kept = kept
+        return out
 
 
 class GroupedProgram:
@@ -166,6 +205,25 @@ class GroupedProgram:
 
     def __call__(self, *args):
         return self.groups.run(self.compiled, args)
+
+
+class _Kept(NamedTuple):
+    """A whole array's rows in the groups of a call: ``parts[g]``, group g's (``rows``:
+    the call's rows, ``_rows_key``). ``whole`` is held so that its id names it alone."""
+    whole: jax.Array
+    rows: bytes
+    parts: list
+
+
+def _rows_key(rows: list[np.ndarray]) -> bytes:
+    return np.asarray(rows, np.int64).tobytes()
+
+
+def _file(kept: dict, wholes: list, parts: list[list], key: bytes) -> None:
+    """Files each of ``wholes`` (immutable arrays only) with its groups' ``parts``."""
+    for whole, own in zip(wholes, parts):
+        if isinstance(whole, jax.Array):
+            kept[id(whole)] = _Kept(whole, key, own)
 
 
 def _ready(compiled, args: tuple):
