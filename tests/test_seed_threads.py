@@ -168,4 +168,5 @@ def test_a_call_on_the_last_calls_arrays_takes_their_groups_and_a_donated_one_is
     kept = jax.jit(lambda v, b: {"v": v + 1, "b": b}).lower(*other.shapes((x, flags))).compile()
     out = other.program(kept)(x, flags)
     out = other.program(kept)(out["v"], jnp.asarray([False, True, True, False, False]))
+    assert reused[-2:] == [False, False]
     np.testing.assert_array_equal(np.asarray(out["v"]), np.asarray(x + 2))
