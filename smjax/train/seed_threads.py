@@ -155,9 +155,8 @@ class SeedGroups:
 
     def _reuse(self, x, key: bytes) -> list | None:
         """The last call's groups' arrays of ``x`` for rows ``key``, or None."""
-        kept = self._kept.get(id(x))
-        if (kept is None or kept.whole is not x or kept.rows != key
-                or any(p.is_deleted() for p in kept.parts)):
+        kept = self._kept.get(id(x))  # held, the whole's id names it alone
+        if kept is None or kept.rows != key or any(p.is_deleted() for p in kept.parts):
             return None
         return kept.parts
 
@@ -188,7 +187,7 @@ class SeedGroups:
         rows, has_busy = self.deal(args)
         due = [g for g in range(self.groups)
                if has_busy[g] or not (self.busy and self.busy.droppable)] or [0]
-        kept: dict[int, _Kept] = {}
+        kept: dict[int, _Kept] = {}  # filed by split and join, for the next call
         groups = self.split(args, [rows[g] for g in due], kept)
         others = [self._pool.submit(_ready, compiled, g) for g in groups[1:]]
         ran = dict(zip(due, [_ready(compiled, groups[0])] + [f.result() for f in others]))
