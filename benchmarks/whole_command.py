@@ -41,7 +41,10 @@ def one_run(tree: Path, cache: Path, args: list[str], kind: str) -> dict:
         return record | {"stderr": proc.stderr[-2000:]}
     results = json.loads((out / "results.json").read_text())
     record |= {k: results[k] for k in ("wall_seconds", "compile_seconds", "final_success",
-                                       "episodes_to_threshold") if k in results}
+                                       "episodes_to_threshold", "total_episodes")
+               if k in results}
+    if results.get("finetune"):
+        record["finetune_episodes"] = results["finetune"]["episodes"]
     if (out / "profile.json").is_file():
         record["profile"] = json.loads((out / "profile.json").read_text())
     shutil.rmtree(out.parent, ignore_errors=True)

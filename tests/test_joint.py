@@ -16,6 +16,7 @@ from smjax.options.carry import NO_OPTION, Controls
 from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.engine import Engine
+from smjax.train.learner import make_joint_learner
 from smjax.train.loop import HierarchyTrainer
 from smjax.train.plans import plan_levels
 from smjax.train.run import run
@@ -275,4 +276,46 @@ def test_bad_joint_settings_are_refused():
             TrainConfig(**{field: value})
     cfg = TrainConfig(**(JOINT_SMALL | {"agent": {"recurrent_size": 8}}))
     with pytest.raises(ConfigError, match="recurrent"):
+        run(make_keydoor(), cfg, [0], progress=False)
+
+
+def _grad_steps_of_one_update(engine, state):
+    """Each option's gradient steps in one joint update of a random record."""
+    O, B, A = engine.h.num_options, 5, engine.h.num_actions
+    learners = jax.tree.map(lambda x: x[0], state.learner)
+    obs = jax.random.normal(jax.random.PRNGKey(5), (6, B) + engine.example_obs.shape)
+    traj = _record(B=B, O=O, A=A)._replace(obs=obs, decision=jnp.ones((6, B, O), bool))
+    carry = state.carry.replace(pending=jax.tree.map(lambda x: x[0, :, :B],
+                                                     state.carry.pending))
+    after, _, _ = jax.jit(engine._learn_joint)(learners, carry, traj, jax.random.PRNGKey(7))
+    return np.asarray(after.grad_steps - learners.grad_steps)
+
+
+def test_finetune_agent_sets_the_joint_updates_epochs_and_minibatches():
+    # the levels' learner takes 4 epochs x 4 minibatches of steps, joint fine-tuning's
+    # (finetune_agent) 1 x 2: the same learners, updated by another update
+    env, params = make_keydoor()
+    h = env.hierarchies()["paper"]
+    cfg = TrainConfig(**(JOINT_SMALL | {"finetune_agent": {"update_epochs": 1,
+                                                           "num_minibatches": 2}}))
+    levels_agent = make_agent("ppo")
+    joint_agent = make_joint_learner(env, params, cfg, levels_agent)
+    assert joint_agent is not levels_agent
+    assert make_joint_learner(env, params, TrainConfig(**JOINT_SMALL), levels_agent) \
+        is levels_agent
+    engine = Engine(env, params, h, levels_agent, cfg, joint_agent)
+    default = Engine(env, params, h, levels_agent, TrainConfig(**JOINT_SMALL))
+    assert (_grad_steps_of_one_update(engine, _joint_state(engine)) == 2).all()
+    assert (_grad_steps_of_one_update(default, _joint_state(default)) == 16).all()
+
+
+def test_finetune_agent_update_settings_are_checked():
+    tuned = {"finetune_agent": {"update_epochs": 1}}
+    with pytest.raises(ConfigError, match="only joint fine-tuning.*--finetune-mode joint"):
+        run(make_keydoor(), TrainConfig(**(SMALL | tuned)), [0], progress=False)
+    with pytest.raises(ConfigError, match="finetune_agent.*update_epochs"):
+        TrainConfig(**(JOINT_SMALL | {"finetune_agent": {"update_epochs": 0}}))
+    # a setting that changes the learner's parameters would not fit the levels' learners
+    cfg = TrainConfig(**(JOINT_SMALL | {"finetune_agent": {"recurrent_size": 8}}))
+    with pytest.raises(ConfigError, match="changes the learner's state"):
         run(make_keydoor(), cfg, [0], progress=False)

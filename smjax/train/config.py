@@ -106,8 +106,10 @@ class TrainConfig:
         averages out the noise while a slow climb still counts.
       finetune_plateau_gain: the least rise of a block's mean that counts as climbing; a
         larger gain ends the phase sooner, at a small cost in final success.
-      finetune_agent: learner hyper-parameters used in fine-tuning instead of ``agent``'s;
-        only traced leaves (the sweepable ones), so the phase compiles nothing new.
+      finetune_agent: learner hyper-parameters used in fine-tuning instead of ``agent``'s
+        (traced leaves, the sweepable ones: the phase compiles nothing new), and in joint
+        fine-tuning the update's settings (PPO's update_epochs, num_minibatches): its
+        update is then built with them, from the same learners.
       finetune_side_cost: in fine-tuning, a template learner is also rewarded by the
         decrease of its template's ``side_cost`` (Craft: items held beyond the promise).
       finetune_side_cost_weight: the side cost's weight (1: as the templates declare it).

@@ -65,7 +65,8 @@ def check_fields(cfg) -> None:
     need(isinstance(cfg.finetune_agent, dict) and all(
         isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
         and math.isfinite(v) for k, v in cfg.finetune_agent.items()),
-         "finetune_agent", "a mapping of learner hyper-parameter names to numbers")
+         "finetune_agent", "a mapping of learner hyper-parameter names (or update settings: "
+         "update_epochs, num_minibatches) to numbers")
     if "gamma" in cfg.agent:  # one source: the trainer discounts with TrainConfig.gamma
         raise ConfigError(f"agent field 'gamma' = {cfg.agent['gamma']!r} would be ignored: the "
                           f"discount is the config field 'gamma'; set it with --set gamma=X "
@@ -118,7 +119,7 @@ def check_learner(cfg) -> None:
         # a learning rate of 0 freezes what fine-tuning would move: allowed here alone
         if tuning.get("learning_rate") == 0 and not isinstance(tuning["learning_rate"], bool):
             tuning = tuning | {"learning_rate": agent.get("learning_rate", 1e-3)}
-        make_config(cfg.algo, **(agent | tuning))
+        check_agent(make_config(cfg.algo, **(agent | tuning)), cfg.num_envs, cfg.rollout_ticks)
     except (ValueError, TypeError) as err:
         raise ConfigError(short_message(f"config field 'finetune_agent': {err}")) from None
 

@@ -26,6 +26,7 @@ from smjax.options.runner import NO_OPTION, Controls, EnvCarry, HierarchyRunner,
 from smjax.train.ahead import CompileAhead
 from smjax.train.config import TrainConfig
 from smjax.train.episode_calls import EpisodeCalls
+from smjax.train.learner import check_same_state
 from smjax.train.program_cache import SavedOnFirstCall, compile_program
 from smjax.train.seed_arrays import finite_flag
 from smjax.train.seed_threads import ALL_SEED_AXES, Busy, SeedGroups, thread_count
@@ -66,8 +67,11 @@ class ChunkControls(NamedTuple):
 class Engine:
     """Builds the jitted functions over seeds for one (env, hierarchy, agent, config)."""
 
-    def __init__(self, env, env_params, hierarchy: Hierarchy, agent, cfg: TrainConfig):
+    def __init__(self, env, env_params, hierarchy: Hierarchy, agent, cfg: TrainConfig,
+                 joint_agent=None):
         self.env, self.env_params, self.h, self.agent, self.cfg = env, env_params, hierarchy, agent, cfg
+        # the learner whose update joint fine-tuning runs (``learner.make_joint_learner``)
+        self.joint_agent = agent if joint_agent is None else joint_agent
         # how frozen policies act: the config's choice, else what the learner declares
         self.frozen_policy = mode = (agent.frozen_policy if cfg.frozen_policy == "auto"
                                      else cfg.frozen_policy)
@@ -107,6 +111,8 @@ class Engine:
         saved = functools.partial(SavedOnFirstCall, identity_of=lambda: self.program_identity)
         self._init = saved(jax.jit(seeds(lambda k: agent.init(k, self.example_obs,
                                                               self.num_actions))), "init")
+        if self.joint_agent is not agent:
+            check_same_state(agent, self.joint_agent, self.example_obs, self.num_actions)
         # host-side array plumbing as one program each, not one tiny program per leaf
         self._per_option = jax.jit(self._copies_per_option)
         self._warm = jax.jit(jax.vmap(agent.warm_start))
@@ -241,7 +247,7 @@ class Engine:
         """Every option's update on its own rows of the rollout and pending decisions
         (``carry.pending``: axis O), in one ``update_options`` (the agent's, or per option)."""
         batch, pending = joint_batch(carry.pending, traj)
-        learners, metrics = options_update(self.agent)(learners, batch, key)
+        learners, metrics = options_update(self.joint_agent)(learners, batch, key)
         return learners, carry.replace(pending=pending), metrics
 
     def _updates(self, state: SeedState, active, controls: Controls, bank, learn, windows,

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from smjax.train.config import ConfigError, TrainConfig
+from smjax.train.learner import update_fields
 
 
 def next_turn(turn: int, order: list[str], turns: list[dict], rested: dict[str, int],
@@ -53,13 +54,14 @@ def finetune_hp(cfg: TrainConfig, hp: dict) -> dict:
     """``cfg.fine_tuning.agent`` as the learner's per-slot hyper-parameter leaves (``hp``: a
     fresh learner's)."""
     check_finetune_agent(cfg, hp)
-    return {k: jnp.full_like(hp[k], v) for k, v in cfg.fine_tuning.agent.items()}
+    return {k: jnp.full_like(hp[k], v) for k, v in cfg.fine_tuning.agent.items() if k in hp}
 
 
 def check_finetune_agent(cfg: TrainConfig, hp) -> None:
     """``cfg.fine_tuning.agent`` names only hyper-parameters the learner reads per turn
-    (``hp``: a fresh learner's, or their names)."""
-    unknown = sorted(set(cfg.fine_tuning.agent) - set(hp))
+    (``hp``: a fresh learner's, or their names) and its update's settings
+    (``learner.update_fields``)."""
+    unknown = sorted(set(cfg.fine_tuning.agent) - set(hp) - set(update_fields(cfg)))
     if unknown:
         raise ConfigError(f"config field 'finetune_agent' names {unknown}, which the "
                           f"{cfg.algo} learner does not read per turn; it reads {sorted(hp)}")

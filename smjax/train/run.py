@@ -14,7 +14,7 @@ from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
 from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig, config_differences
 from smjax.train.engine import Engine
-from smjax.train.learner import make_learner
+from smjax.train.learner import make_joint_learner, make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.hooks import Hook, ResultsReport
 from smjax.train.loop import HierarchyTrainer, NonFiniteError, default_hooks
@@ -161,6 +161,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
         resolved = resolve_run(env, cfg, given)
         cfg = resolved.cfg
         agent = make_learner(env, env_params, cfg)
+        joint_agent = make_joint_learner(env, env_params, cfg, agent)
     identity = run_identity(env.name, cfg, seeds, env_overrides)
     if given is not None:  # its shape must match on resume
         identity["hierarchy_declared"] = declared_identity(given)
@@ -178,7 +179,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
     try:
         with TIMELINE.span("memory check, engine and trainer"):
             check_fits(env, env_params, cfg, len(slot_seeds))
-            engine = Engine(env, env_params, resolved.hierarchy, agent, cfg)
+            engine = Engine(env, env_params, resolved.hierarchy, agent, cfg, joint_agent)
             engine.program_identity = cacheable_identity(
                 task, given, identity | {"task_name": task, "config": cfg.to_dict()})
             hooks = default_hooks(cfg, out_dir, outputs.progress, identity)
