@@ -34,7 +34,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("task", nargs="?")
     ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--seed-offset", type=int, default=0, help="the first seed")
     ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="a training config field, as smjax train --set")
     ap.add_argument("--out", help="the per-chunk records (jsonl)")
     ap.add_argument("--summary", help="print the grouping of this file and stop")
     args = ap.parse_args()
@@ -44,6 +47,7 @@ def main() -> None:
     if not (args.task and args.out):
         ap.error("a task and --out (or --summary FILE)")
 
+    from smjax.cli_train import key_values
     from smjax.train.config import resolve_config
     from smjax.train.hooks import Hook
     from smjax.train.run import run
@@ -58,8 +62,10 @@ def main() -> None:
 
     env = dict(kv.split("=", 1) for kv in args.env)
     with open(args.out, "w") as file:
-        run(args.task, resolve_config(), list(range(args.seeds)), None, env_overrides=env,
-            progress=False, hooks=[Timeline(file)])
+        cfg = resolve_config(sets=key_values(args.set, "--set"))
+        seeds = list(range(args.seed_offset, args.seed_offset + args.seeds))
+        run(args.task, cfg, seeds, None, env_overrides=env, progress=False,
+            hooks=[Timeline(file)])
     summary(args.out)
 
 

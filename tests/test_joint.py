@@ -309,6 +309,26 @@ def test_finetune_agent_sets_the_joint_updates_epochs_and_minibatches():
     assert (_grad_steps_of_one_update(default, _joint_state(default)) == 16).all()
 
 
+def test_a_run_fine_tunes_with_the_joint_learner(monkeypatch):
+    import sys
+
+    import smjax.train.engine as engine_module
+
+    run_module = sys.modules["smjax.train.run"]  # (``smjax.train.run`` is also the function)
+
+    made, used = [], []
+    real_make, real_update = run_module.make_joint_learner, engine_module.options_update
+    monkeypatch.setattr(run_module, "make_joint_learner",
+                        lambda *a: made.append(real_make(*a)) or made[-1])
+    monkeypatch.setattr(engine_module, "options_update",
+                        lambda agent: used.append(agent) or real_update(agent))
+    cfg = TrainConfig(**(JOINT_SMALL | {"finetune_threshold": 1.0,
+                                        "finetune_agent": {"update_epochs": 1}}))
+    res = run(make_keydoor(), cfg, [0], progress=False)
+    assert res["finetune"]["episodes"][0] > 0
+    assert used and all(agent is made[0] for agent in used)
+
+
 def test_finetune_agent_update_settings_are_checked():
     tuned = {"finetune_agent": {"update_epochs": 1}}
     with pytest.raises(ConfigError, match="only joint fine-tuning.*--finetune-mode joint"):
