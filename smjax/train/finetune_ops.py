@@ -64,4 +64,6 @@ def check_finetune_agent(cfg: TrainConfig, hp) -> None:
     unknown = sorted(set(cfg.fine_tuning.agent) - set(hp) - set(update_fields(cfg)))
     if unknown:
         raise ConfigError(f"config field 'finetune_agent' names {unknown}, which the "
-                          f"{cfg.algo} learner does not read per turn; it reads {sorted(hp)}")
+                          f"{cfg.algo} learner does not read per turn; it reads {sorted(hp)} "
+                          "(and joint fine-tuning's update takes its settings, such as "
+                          "update_epochs)")
