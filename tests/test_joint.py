@@ -78,6 +78,17 @@ def _joint_state(engine):
                               jax.random.PRNGKey(3)[None], jax.random.PRNGKey(4)[None])
 
 
+def _update_inputs(engine, state, seed: int = 0):
+    """One seed's learners, its carry (only the pending rows of 5 environments are read)
+    and a random joint record [6, 5, O] over random observations."""
+    O, B, A = engine.h.num_options, 5, engine.h.num_actions
+    learners = jax.tree.map(lambda x: x[0], state.learner)
+    obs = jax.random.normal(jax.random.PRNGKey(5), (6, B) + engine.example_obs.shape)
+    traj = _record(B=B, O=O, A=A, seed=seed)._replace(obs=obs)
+    pending = jax.tree.map(lambda x: x[0, :, :B], state.carry.pending)
+    return learners, state.carry.replace(pending=pending), traj
+
+
 @settings(max_examples=6, deadline=None, phases=[Phase.generate])
 @given(data=st.data(), seed=st.integers(0, 2**16))
 def test_each_option_trains_only_on_its_own_rows(keydoor_engine, data, seed):
@@ -86,11 +97,7 @@ def test_each_option_trains_only_on_its_own_rows(keydoor_engine, data, seed):
     engine, state, learn = keydoor_engine
     O, B, A = engine.h.num_options, 5, engine.h.num_actions
     other = data.draw(st.integers(0, O - 1))
-    learners = jax.tree.map(lambda x: x[0], state.learner)
-    obs = jax.random.normal(jax.random.PRNGKey(5), (6, B) + engine.example_obs.shape)
-    traj = _record(B=B, O=O, A=A, seed=seed)._replace(obs=obs)
-    pending = jax.tree.map(lambda x: x[0, :, :B], state.carry.pending)
-    carry = state.carry.replace(pending=pending)  # only the pending rows are read
+    learners, carry, traj = _update_inputs(engine, state, seed)
     scrambled = _record(B=B, O=O, A=A, seed=seed + 1)
     pick = lambda a, b: a.at[:, :, other].set(b[:, :, other])  # noqa: E731
     scrambled = scrambled._replace(discount=jax.random.uniform(jax.random.PRNGKey(seed),
@@ -280,13 +287,10 @@ def test_bad_joint_settings_are_refused():
 
 
 def _grad_steps_of_one_update(engine, state):
-    """Each option's gradient steps in one joint update of a random record."""
-    O, B, A = engine.h.num_options, 5, engine.h.num_actions
-    learners = jax.tree.map(lambda x: x[0], state.learner)
-    obs = jax.random.normal(jax.random.PRNGKey(5), (6, B) + engine.example_obs.shape)
-    traj = _record(B=B, O=O, A=A)._replace(obs=obs, decision=jnp.ones((6, B, O), bool))
-    carry = state.carry.replace(pending=jax.tree.map(lambda x: x[0, :, :B],
-                                                     state.carry.pending))
+    """Each option's gradient steps in one joint update of a random record in which every
+    option decides at every tick."""
+    learners, carry, traj = _update_inputs(engine, state)
+    traj = traj._replace(decision=jnp.ones_like(traj.decision))
     after, _, _ = jax.jit(engine._learn_joint)(learners, carry, traj, jax.random.PRNGKey(7))
     return np.asarray(after.grad_steps - learners.grad_steps)
 
