@@ -29,6 +29,21 @@ def _ahead_labels() -> dict:
     return {k: v[1] for k, v in TIMELINE.jax.items() if k.startswith("compile ahead")}
 
 
+_WHERE_NEEDED: dict = {}
+
+
+def _run_compiled_where_needed(cfg: TrainConfig) -> dict:
+    """The run with nothing compiled ahead (``SMJAX_COMPILE_AHEAD=0``), once per process:
+    the same for every way of compiling ahead compared with it."""
+    if "run" not in _WHERE_NEEDED:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setenv("SMJAX_COMPILE_AHEAD", "0")
+            before = _ahead_labels()
+            _WHERE_NEEDED["run"] = run(make_keydoor(), cfg, [0], progress=False)
+            assert _ahead_labels() == before  # off: nothing compiled on a thread
+    return _WHERE_NEEDED["run"]
+
+
 @pytest.mark.parametrize("threads,from_start", [(1, False), (1, True), (3, True)],
                          ids=["where-first-run", "cpu", "accelerator"])
 def test_a_run_compiled_ahead_gives_the_numbers_of_one_compiled_where_needed(
@@ -39,11 +54,8 @@ def test_a_run_compiled_ahead_gives_the_numbers_of_one_compiled_where_needed(
     monkeypatch.setattr(CompileAhead, "for_backend",
                         classmethod(lambda cls: cls(threads, from_start=from_start)))
     cfg = TrainConfig(**JOINT_SMALL)
-    monkeypatch.setenv("SMJAX_COMPILE_AHEAD", "0")
+    where_needed = _run_compiled_where_needed(cfg)
     before = _ahead_labels()
-    where_needed = run(make_keydoor(), cfg, [0], progress=False)
-    assert _ahead_labels() == before  # off: nothing compiled on a thread
-    monkeypatch.delenv("SMJAX_COMPILE_AHEAD")
     compiles = []
     real = engine_module.compile_program
 
