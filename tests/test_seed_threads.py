@@ -16,7 +16,7 @@ from smjax.train.seed_threads import Busy, SeedGroups, group_count, thread_count
 
 CFG = TrainConfig(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
                   success_window=64, gate_envs=32, eval_envs=32, finetune="on",
-                  finetune_max_episodes=300)
+                  finetune_max_episodes=96)
 
 
 def test_a_run_in_seed_groups_equals_one_program_over_every_seed(monkeypatch):
