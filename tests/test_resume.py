@@ -21,7 +21,7 @@ from smjax.train.run import run
 
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
            success_window=64, gate_envs=32, eval_envs=32, checkpoint_every=2.0,
-           finetune_max_episodes=400, finetune_turn_episodes=150)
+           finetune_max_episodes=128, finetune_turn_episodes=64)
 SCRIPT = """
 import sys
 sys.path.insert(0, {tests!r})
