@@ -203,7 +203,8 @@ def _in_the_joint_phase(trainer) -> bool:
 def test_resume_during_joint_finetuning_is_exact(tmp_path, monkeypatch):
     from smjax.train.hooks import CheckpointHook
 
-    cfg = TrainConfig(**(JOINT_SMALL | {"checkpoint_every": 1e9, "finetune_threshold": 1.0}))
+    cfg = TrainConfig(**(JOINT_SMALL | {"checkpoint_every": 1e9, "finetune_threshold": 1.0,
+                                        "finetune_max_episodes": 96}))
     straight = run(make_keydoor(), cfg, [0, 1], progress=False)
     # saves at level ends, then once inside the joint phase (there it has no boundary of
     # its own), where the machine is lost
