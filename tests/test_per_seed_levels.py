@@ -5,7 +5,7 @@ from smjax.train.run import run
 
 CFG = TrainConfig(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=1500,
                   success_window=64, gate_envs=32, eval_envs=32,
-                  finetune_max_episodes=300, finetune_turn_episodes=100)
+                  finetune_max_episodes=96, finetune_turn_episodes=48)
 
 
 def _seed_view(res: dict, s: int) -> dict:

@@ -14,7 +14,7 @@ from smjax.train import checkpoint as ckpt
 from smjax.train.engine import Engine
 from smjax.train.run import run
 
-CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=300,
+CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=150,
            success_window=64, gate_envs=32, eval_envs=32, finetune="off", checkpoint_every=1e9)
 LRS = [1e-4, 1e-3]
 SWEEP = {"agent.learning_rate": LRS}
