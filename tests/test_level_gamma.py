@@ -29,8 +29,9 @@ def test_every_level_given_a_gamma_equals_that_gamma_as_the_default():
     by_level = TrainConfig(**CFG, gamma=0.99, levels={name: {"gamma": 0.9} for name in LEVELS})
     default = TrainConfig(**CFG, gamma=0.9)
     other = TrainConfig(**CFG, gamma=0.99)
-    assert _same(_numbers(by_level), _numbers(default))
-    assert not _same(_numbers(by_level), _numbers(other))  # the discount does matter here
+    numbers = _numbers(by_level)
+    assert _same(numbers, _numbers(default))
+    assert not _same(numbers, _numbers(other))  # the discount does matter here
 
 
 def test_a_swept_gamma_is_refused_where_a_level_sets_its_own():

@@ -111,10 +111,10 @@ def test_a_repeated_run_loads_its_programs_untraced_and_a_changed_one_does_not(t
     # every program the first run compiled is loaded from JAX's cache, none compiled again
     assert second["misses"] == 0 and second["hits"] >= first["misses"], (first, second)
     assert second["final"] == first["final"] and second["levels"] == first["levels"]
-    # another config is traced, never the saved program loaded; another batch size is
-    # another program, compiled anew (a traced value such as gamma is not: its config's
-    # key differs, test_a_program_key_changes_with_everything_the_program_depends_on)
-    other = _train(tmp_path / "b", cache, "--num-envs", "16")
+    # another config is traced, never a saved program loaded; another evaluation batch is
+    # another episodes program, compiled anew (a traced value such as gamma changes no
+    # program, only the config's key: test_a_program_key_changes_with_everything_...)
+    other = _train(tmp_path / "b", cache, "--set", "eval_envs=16")
     assert other["loaded"] == 0 and other["misses"] > 0, other
     # a damaged entry is dropped and the program traced again, with the same results
     saved[0].write_bytes(b"not a program")
