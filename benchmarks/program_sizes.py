@@ -5,14 +5,14 @@ Trains a task in-process (``smjax.train.run``, the compilation cache and compili
 off, so each program compiles alone, where the run first needs it) and records, for each
 program the engine compiles (``Engine.compile``: the level chunk, joint fine-tuning's
 chunk, the episodes programs), its StableHLO size (operations), the optimized HLO's size
-(instructions and fusions) and the
-seconds to lower and to compile it; and the count and seconds of every other XLA compile
-of the run (``jax.monitoring``'s backend-compile events). ``--phases PROGRAM`` traces
-that program's compile with the profiler and sums XLA's own phases (HLO passes, fusion
-emission, LLVM code generation, thunk emission), each over the threads it ran on.
+(instructions and fusions) and the seconds to lower and to compile it; and the count and
+seconds of all the run's XLA compiles (``jax.monitoring``'s backend-compile events).
+``--phases PROGRAM`` traces that program's compile with the profiler and sums XLA:CPU's own
+phases (HLO passes, then its back end: the fused kernels emitted, LLVM's machine code, the
+thunks), each over the threads it ran on.
 
-    SMJAX_COMPILATION_CACHE=0 JAX_PLATFORMS=cpu python benchmarks/program_sizes.py \\
-        --task craft/make_stick --seeds 2 --env observation=compact --phases chunk
+    JAX_PLATFORMS=cpu python benchmarks/program_sizes.py --task craft/make_stick --seeds 2 \
+        --env observation=compact --phases chunk --json sizes.json
 """
 from __future__ import annotations
 
@@ -30,10 +30,11 @@ os.environ["SMJAX_COMPILE_AHEAD"] = "0"
 
 import jax  # noqa: E402
 
-# XLA's own trace events worth summing for a compile (the rest nest inside these)
+# XLA:CPU's trace events of a compile: the whole, its HLO passes and its back end, and inside
+# the back end the kernels' emission (one event a kernel), LLVM's code generation and the thunks
 PHASES = ("PjRtCpuClient::Compile", "HLO passes through layout assignment",
-          "HLO passes after layout assignment", "CpuCompiler::RunBackend", "FusionCompiler::Compile",
-          "Codegen", "ThunkEmitter::EmitEntryComputation")
+          "HLO passes after layout assignment", "CpuCompiler::RunBackend",
+          "FusionCompiler::Compile", "Codegen", "ThunkEmitter::EmitEntryComputation")
 
 
 def hlo_sizes(lowered, compiled) -> dict:
