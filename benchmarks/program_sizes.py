@@ -21,6 +21,7 @@ import collections
 import json
 import os
 import re
+import shutil
 import sys
 import tempfile
 import time
@@ -59,6 +60,7 @@ def phase_seconds(lower_and_compile) -> dict:
     paths = [os.path.join(d, f) for d, _, files in os.walk(folder) for f in files
              if f.endswith(".xplane.pb")]
     data = jax.profiler.ProfileData.from_file(paths[-1])
+    shutil.rmtree(folder, ignore_errors=True)
     seconds, counts = collections.Counter(), collections.Counter()
     for plane in data.planes:
         for line in plane.lines:
