@@ -35,6 +35,7 @@ import argparse
 import inspect
 import json
 import os
+import re
 import statistics
 import sys
 import time
@@ -46,13 +47,14 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _kernels import describe, kernel_profile  # noqa: E402
 
 
-def _median_time(fn, args, repeats: int, kernels: bool = False
-                 ) -> tuple[float, float, dict | None]:
-    """(compile seconds, median run seconds, kernel profile or None) of
-    ``jax.jit(fn)(*args)``."""
+def _median_time(fn, args, repeats: int, kernels: bool = False, fusions: bool = False
+                 ) -> tuple[float, float, dict | None, int | None]:
+    """(compile seconds, median run seconds, kernel profile or None, fused computations of
+    the optimized HLO or None) of ``jax.jit(fn)(*args)``."""
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(*args).compile()
     compile_s = time.perf_counter() - t0
+    fused = len(re.findall(r"^%fused\S* ", compiled.as_text(), re.M)) if fusions else None
     jax.block_until_ready(compiled(*args))
     runs = []
     for _ in range(repeats):
@@ -60,7 +62,7 @@ def _median_time(fn, args, repeats: int, kernels: bool = False
         jax.block_until_ready(compiled(*args))
         runs.append(time.perf_counter() - t0)
     profile = kernel_profile(lambda: compiled(*args)) if kernels else None
-    return compile_s, statistics.median(runs), profile
+    return compile_s, statistics.median(runs), profile, fused
 
 
 def dense_flops(params) -> int:
@@ -119,11 +121,15 @@ def profile(args) -> dict:
     def record(name, fn, fn_args, n=steps):
         if args.parts and name not in args.parts:
             return
-        compile_s, run_s, kernels = _median_time(fn, fn_args, args.repeats, args.kernels)
+        compile_s, run_s, kernels, fused = _median_time(fn, fn_args, args.repeats, args.kernels,
+                                                        args.fusions)
         out["parts"][name] = {"seconds": run_s, "compile_seconds": compile_s,
                               "env_steps_per_second": n / run_s}
+        fused_text = "" if fused is None else f"  {fused:5d} fusions"
+        if fused is not None:
+            out["parts"][name]["fusions"] = fused
         print(f"{name:12s} {run_s:8.3f} s  compile {compile_s:6.1f} s  "
-              f"{n / run_s:12,.0f} env steps/s", flush=True)
+              f"{n / run_s:12,.0f} env steps/s{fused_text}", flush=True)
         if kernels is not None:
             out["parts"][name]["kernels"] = kernels
             print(describe(kernels), flush=True)
@@ -326,6 +332,9 @@ def main(argv=None) -> None:
     ap.add_argument("--kernels", action="store_true",
                     help="also trace each part's kernels (an accelerator: launches, busy "
                          "time, the longest kernels)")
+    ap.add_argument("--fusions", action="store_true",
+                    help="also count each part's fused computations (XLA's kernels, what its "
+                         "compile time follows)")
     ap.add_argument("--json", help="also write the result here")
     args = ap.parse_args(argv)
     out = profile(args)
