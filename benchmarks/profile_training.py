@@ -35,7 +35,6 @@ import argparse
 import inspect
 import json
 import os
-import re
 import statistics
 import sys
 import time
@@ -44,7 +43,7 @@ import jax
 import jax.numpy as jnp
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _kernels import describe, kernel_profile  # noqa: E402
+from _kernels import describe, fused_computations, kernel_profile  # noqa: E402
 
 
 def _median_time(fn, args, repeats: int, kernels: bool = False, fusions: bool = False
@@ -54,7 +53,7 @@ def _median_time(fn, args, repeats: int, kernels: bool = False, fusions: bool = 
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(*args).compile()
     compile_s = time.perf_counter() - t0
-    fused = len(re.findall(r"^%fused\S* ", compiled.as_text(), re.M)) if fusions else None
+    fused = fused_computations(compiled) if fusions else None
     jax.block_until_ready(compiled(*args))
     runs = []
     for _ in range(repeats):

@@ -21,7 +21,6 @@ import collections
 import json
 import os
 import re
-import shutil
 import sys
 import tempfile
 import time
@@ -30,6 +29,9 @@ os.environ["SMJAX_COMPILATION_CACHE"] = "0"
 os.environ["SMJAX_COMPILE_AHEAD"] = "0"
 
 import jax  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _kernels import fused_computations  # noqa: E402
 
 # XLA:CPU's trace events of a compile: the whole, its HLO passes and its back end, and inside
 # the back end the kernels' emission (one event a kernel), LLVM's code generation and the thunks
@@ -41,26 +43,24 @@ PHASES = ("PjRtCpuClient::Compile", "HLO passes through layout assignment",
 def hlo_sizes(lowered, compiled) -> dict:
     """Operations of the StableHLO; instructions and fused computations of the optimized
     HLO."""
-    mlir = lowered.as_text()
-    hlo = compiled.as_text()
-    return {"stablehlo_ops": len(re.findall(r"\bstablehlo\.[a-z_]+", mlir)),
-            "hlo_instructions": len(re.findall(r"^\s+(?:ROOT )?%\S+ = ", hlo, re.M)),
-            "fusions": len(re.findall(r"^%fused\S* ", hlo, re.M))}
+    return {"stablehlo_ops": len(re.findall(r"\bstablehlo\.[a-z_]+", lowered.as_text())),
+            "hlo_instructions": len(re.findall(r"^\s+(?:ROOT )?%\S+ = ", compiled.as_text(),
+                                               re.M)),
+            "fusions": fused_computations(compiled)}
 
 
-def phase_seconds(lower_and_compile) -> dict:
-    """XLA's compile phases (seconds, summed over its threads) while
-    ``lower_and_compile()`` runs."""
-    folder = tempfile.mkdtemp(prefix="program-sizes-trace-")
-    jax.profiler.start_trace(folder)
-    try:
-        lower_and_compile()
-    finally:
-        jax.profiler.stop_trace()
-    paths = [os.path.join(d, f) for d, _, files in os.walk(folder) for f in files
-             if f.endswith(".xplane.pb")]
-    data = jax.profiler.ProfileData.from_file(paths[-1])
-    shutil.rmtree(folder, ignore_errors=True)
+def traced(fn):
+    """``fn()``'s result and XLA's compile phases while it ran (seconds, summed over its
+    threads)."""
+    with tempfile.TemporaryDirectory(prefix="program-sizes-trace-") as folder:
+        jax.profiler.start_trace(folder)
+        try:
+            result = fn()
+        finally:
+            jax.profiler.stop_trace()
+        paths = [os.path.join(d, f) for d, _, files in os.walk(folder) for f in files
+                 if f.endswith(".xplane.pb")]
+        data = jax.profiler.ProfileData.from_file(paths[-1])
     seconds, counts = collections.Counter(), collections.Counter()
     for plane in data.planes:
         for line in plane.lines:
@@ -69,8 +69,8 @@ def phase_seconds(lower_and_compile) -> dict:
                 if name:
                     seconds[name] += event.duration_ns / 1e9
                     counts[name] += 1
-    return {name: {"seconds": round(seconds[name], 3), "events": counts[name]}
-            for name in PHASES if counts[name]}
+    return result, {name: {"seconds": round(seconds[name], 3), "events": counts[name]}
+                    for name in PHASES if counts[name]}
 
 
 def main(argv=None) -> None:
@@ -78,16 +78,17 @@ def main(argv=None) -> None:
     ap.add_argument("--task", default="craft/make_stick")
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--set", action="append", default=[], metavar="FIELD=JSON",
-                    help="a TrainConfig field")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="a training config field, as smjax train --set")
     ap.add_argument("--phases", nargs="*", default=[], metavar="PROGRAM",
                     help="programs (chunk, joint_chunk, episodes-256, ...) whose compile is "
                          "traced, for XLA's phases")
     ap.add_argument("--json", help="also write the records here")
     args = ap.parse_args(argv)
 
+    from smjax.cli_train import key_values
     from smjax.train import engine as engine_module
-    from smjax.train.config import TrainConfig
+    from smjax.train.config import resolve_config
     from smjax.train.run import run
 
     programs: list[dict] = []
@@ -98,20 +99,19 @@ def main(argv=None) -> None:
 
     def measured(jitted, fn_args, name, identity, static=(), donate=()):
         """What ``compile_program`` does with the cache off, timed and measured."""
-        times, out = [time.perf_counter()], []
-
         def lower_and_compile():
-            out.append(jitted.lower(*fn_args, *static))
-            times.append(time.perf_counter())
-            out.append(out[0].compile())
-            times.append(time.perf_counter())
+            t0 = time.perf_counter()
+            lowered = jitted.lower(*fn_args, *static)
+            t1 = time.perf_counter()
+            return lowered, lowered.compile(), t1 - t0, time.perf_counter() - t1
 
-        phases = phase_seconds(lower_and_compile) if name in args.phases else None
-        if phases is None:
-            lower_and_compile()
-        lowered, compiled = out
-        record = {"program": name, "lower_seconds": round(times[1] - times[0], 2),
-                  "compile_seconds": round(times[2] - times[1], 2)} | hlo_sizes(lowered, compiled)
+        phases = None
+        if name in args.phases:
+            (lowered, compiled, lower_s, compile_s), phases = traced(lower_and_compile)
+        else:
+            lowered, compiled, lower_s, compile_s = lower_and_compile()
+        record = {"program": name, "lower_seconds": round(lower_s, 2),
+                  "compile_seconds": round(compile_s, 2)} | hlo_sizes(lowered, compiled)
         if phases is not None:
             record["phases"] = phases
         programs.append(record)
@@ -120,7 +120,7 @@ def main(argv=None) -> None:
 
     engine_module.compile_program = measured
     overrides = dict(kv.split("=", 1) for kv in args.env)
-    cfg = TrainConfig(**{k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.set)})
+    cfg = resolve_config(sets=key_values(args.set, "--set"))
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as out:
         results = run(args.task, cfg, list(range(args.seeds)), out, env_overrides=overrides,
