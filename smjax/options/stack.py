@@ -40,10 +40,11 @@ def stack_top(stack: ExecutionStack) -> jax.Array:
 def stack_push(stack: ExecutionStack, option: jax.Array, when: jax.Array | bool = True) -> ExecutionStack:
     """Push ``option`` (with 0 steps) if ``when`` and there is room."""
     ok = jnp.logical_and(jnp.asarray(when), stack.depth < stack.capacity)
-    pos = jnp.minimum(stack.depth, stack.capacity - 1)
-    new_option = jnp.where(ok, stack.option.at[pos].set(jnp.asarray(option, jnp.int32)), stack.option)
-    new_steps = jnp.where(ok, stack.steps.at[pos].set(0), stack.steps)
-    return ExecutionStack(new_option, new_steps, stack.depth + ok.astype(jnp.int32))
+    # The new slot as a mask, not an indexed write: vmapped, an indexed write is a scatter,
+    # its own kernel and a copy of the stack on a GPU, every push of every tick.
+    at = ok & (jnp.arange(stack.capacity) == stack.depth)
+    return ExecutionStack(jnp.where(at, jnp.asarray(option, jnp.int32), stack.option),
+                          jnp.where(at, 0, stack.steps), stack.depth + ok.astype(jnp.int32))
 
 
 def stack_truncate(stack: ExecutionStack, new_depth: jax.Array) -> ExecutionStack:
