@@ -7,7 +7,8 @@ them, and the kernels that took longest. On an accelerator, a program whose busy
 close to its wall time and whose kernels are many and short is bound by their count (each
 launch costs microseconds, however little it does), not by FLOPs; a CPU's trace holds no
 device streams, so there the profile is empty. ``fused_computations(compiled)`` counts the
-kernels XLA generates code for, on any backend.
+kernels XLA generates code for, on any backend, and ``kernels_by_source(compiled)`` says
+which source lines they come from.
 """
 from __future__ import annotations
 
@@ -82,3 +83,67 @@ def describe(profile: dict) -> str:
              f"kernel)"]
     lines += [f"     {s * 1e3:7.2f} ms {n:7.0f}x  {name[:90]}" for name, s, n in profile["top"]]
     return "\n".join(lines)
+
+
+# what launches work in a compiled program: fused kernels and the unfused operations XLA
+# runs as kernels of their own (copies, library calls, scatters, ...)
+_LAUNCHES = ("fusion", "custom-call", "copy", "scatter", "gather", "sort", "concatenate",
+             "dynamic-update-slice", "dynamic-slice", "reduce", "transpose", "pad", "slice")
+
+
+def _source_lines(text: str) -> dict:
+    """stack frame id -> [(file, function, line), ...] innermost first, from the optimized
+    HLO's FileNames / FunctionNames / FileLocations / StackFrames tables."""
+    def table(name: str, nxt: str) -> str:
+        start = text.find(f"\n{name}\n")
+        return "" if start < 0 else text[start:text.find(f"\n{nxt}\n", start + 1)]
+
+    files = dict(re.findall(r'^(\d+) "([^"]*)"$', table("FileNames", "FunctionNames"), re.M))
+    funcs = dict(re.findall(r'^(\d+) "([^"]*)"$', table("FunctionNames", "FileLocations"),
+                            re.M))
+    locs = {i: (files.get(f, "?"), funcs.get(fn, "?"), int(line)) for i, f, fn, line in
+            re.findall(r"^(\d+) \{file_name_id=(\d+) function_name_id=(\d+) line=(\d+)",
+                       table("FileLocations", "StackFrames"), re.M)}
+    parents = {i: (loc, parent) for i, loc, parent in
+               re.findall(r"^(\d+) \{file_location_id=(\d+) parent_frame_id=(\d+)", text, re.M)}
+
+    def chain(frame: str) -> list:
+        out, seen = [], set()
+        while frame in parents and frame not in seen:
+            seen.add(frame)
+            loc, frame = parents[frame]
+            out.append(locs.get(loc, ("?", "?", 0)))
+        return out
+
+    return {frame: chain(frame) for frame in parents}
+
+
+def kernels_by_source(compiled, package: str = "/smjax/") -> collections.Counter:
+    """A compiled program's launches (fusions and unfused kernels of every computation
+    that is not itself fused) counted by source line: the innermost frame in ``package``
+    (else the innermost frame at all), as ``path:line function``. Each launch counts once
+    however often its loop runs; XLA names no source for some (copies it inserts)."""
+    text = compiled.as_text()
+    called = set(re.findall(r"(?:calls|to_apply)=%([^,\s}]+)", text))
+    frames = _source_lines(text)
+    counts: collections.Counter = collections.Counter()
+    for computation in re.split(r"\n(?=\S)", text):
+        name = re.match(r"(?:ENTRY )?%(\S+)", computation)
+        if not name or name.group(1) in called:
+            continue
+        for line in computation.splitlines()[1:]:
+            op = re.search(r"= (?:\([^=]*\)|\S+) ([a-z-]+)\(", line)
+            if not op or op.group(1) not in _LAUNCHES:
+                continue
+            frame = re.search(r"stack_frame_id=(\d+)", line)
+            chain = frames.get(frame.group(1), []) if frame else []
+            mine = [f for f in chain if package in f[0]] or chain
+            if mine:
+                path, function, number = mine[0]
+                path = (path.split(package, 1)[-1] if package in path else
+                        path.split("site-packages/")[-1] if "site-packages/" in path else
+                        "/".join(path.split("/")[-2:]))
+                counts[f"{path}:{number} {function}"] += 1
+            else:
+                counts[f"({op.group(1)}, no source)"] += 1
+    return counts

@@ -43,17 +43,19 @@ import jax
 import jax.numpy as jnp
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _kernels import describe, fused_computations, kernel_profile  # noqa: E402
+from _kernels import (  # noqa: E402
+    describe, fused_computations, kernel_profile, kernels_by_source,
+)
 
 
 def _median_time(fn, args, repeats: int, kernels: bool = False, fusions: bool = False
-                 ) -> tuple[float, float, dict | None, int | None]:
-    """(compile seconds, median run seconds, kernel profile or None, fused computations of
-    the optimized HLO or None) of ``jax.jit(fn)(*args)``."""
+                 ) -> tuple[float, float, dict | None, tuple | None]:
+    """(compile seconds, median run seconds, kernel profile or None, (fused computations of
+    the optimized HLO, its launches by source line) or None) of ``jax.jit(fn)(*args)``."""
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(*args).compile()
     compile_s = time.perf_counter() - t0
-    fused = fused_computations(compiled) if fusions else None
+    fused = (fused_computations(compiled), kernels_by_source(compiled)) if fusions else None
     jax.block_until_ready(compiled(*args))
     runs = []
     for _ in range(repeats):
@@ -124,11 +126,14 @@ def profile(args) -> dict:
                                                         args.fusions)
         out["parts"][name] = {"seconds": run_s, "compile_seconds": compile_s,
                               "env_steps_per_second": n / run_s}
-        fused_text = "" if fused is None else f"  {fused:5d} fusions"
-        if fused is not None:
-            out["parts"][name]["fusions"] = fused
+        fused_text = "" if fused is None else f"  {fused[0]:5d} fusions"
         print(f"{name:12s} {run_s:8.3f} s  compile {compile_s:6.1f} s  "
               f"{n / run_s:12,.0f} env steps/s{fused_text}", flush=True)
+        if fused is not None:
+            out["parts"][name].update(fusions=fused[0], launches_by_source=dict(fused[1]))
+            print(f"   {sum(fused[1].values())} launches in the program's text; most from:")
+            for where, count in fused[1].most_common(args.sources):
+                print(f"     {count:4d}  {where}", flush=True)
         if kernels is not None:
             out["parts"][name]["kernels"] = kernels
             print(describe(kernels), flush=True)
@@ -333,7 +338,10 @@ def main(argv=None) -> None:
                          "time, the longest kernels)")
     ap.add_argument("--fusions", action="store_true",
                     help="also count each part's fused computations (XLA's kernels, what its "
-                         "compile time follows)")
+                         "compile time follows) and where its launches come from (source "
+                         "lines; each once, however often its loop runs)")
+    ap.add_argument("--sources", type=int, default=8, metavar="N",
+                    help="with --fusions, how many source lines to print (default 8)")
     ap.add_argument("--json", help="also write the result here")
     args = ap.parse_args(argv)
     out = profile(args)
