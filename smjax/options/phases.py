@@ -72,9 +72,8 @@ def decide(stack: ExecutionStack, frozen_choice: jax.Array, learner_choice: jax.
     capacity deep, so that many steps always reach a decision.
 
     Writes go through masks, not indexed writes (a scatter is a kernel of its own on a
-    GPU); reads stay indexed. Reads through masks or chains of selects measured slower on
-    both backends: a CPU rollout 2.5-17x, a GPU chunk 8% (benchmarks/RESULTS.md, "Fewer
-    kernels in a tick").
+    GPU); reads stay indexed: read through masks or chains of selects, the walk made a CPU
+    rollout 2.5-17x slower (benchmarks/RESULTS.md, "Fewer kernels in a tick").
     """
     num_options = learned.shape[0]
     decided = jnp.asarray(False)
