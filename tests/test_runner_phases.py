@@ -114,6 +114,20 @@ def test_decide_keeps_the_stack_below_and_fixes_at_most_one_realisation(
         assert not pushable[int(d.teleported)]
 
 
+def test_a_vmapped_walk_writes_without_scatters():
+    """The walk's pushes and its record of who chose are masked writes: vmapped over the
+    environments, an indexed write would be a scatter, on a GPU a kernel and a copy of the
+    stack of its own at every step of every tick."""
+    stacks = batch(stack_of(0), stack_of(0, 1), stack_of(0, 1, 2))
+    frozen = jnp.asarray([[act_of(1), act_of(2), act_of(3), 0]] * 3, jnp.int32)
+    walk = jax.vmap(lambda st, f: run_decide(st, f, 0, learned=(True, True, True, False)))
+    text = jax.jit(walk).lower(stacks, frozen).as_text()
+    assert "scatter" not in text
+    d = walk(stacks, frozen)  # and the walk still pushes down to the unlearned template
+    np.testing.assert_array_equal(d.stack.depth, [4, 4, 4])
+    np.testing.assert_array_equal(d.scripted, [3, 3, 3])
+
+
 # ---- pop ----------------------------------------------------------------------------
 K_MAX = jnp.asarray([10 ** 6, 5, 5, 3], jnp.int32)
 
