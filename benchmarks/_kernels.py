@@ -6,9 +6,10 @@ JSON): per call, the kernels launched, the seconds the device's streams were bus
 them, and the kernels that took longest. On an accelerator, a program whose busy time is
 close to its wall time and whose kernels are many and short is bound by their count (each
 launch costs microseconds, however little it does), not by FLOPs; a CPU's trace holds no
-device streams, so there the profile is empty. ``fused_computations(compiled)`` counts the
-kernels XLA generates code for, on any backend, and ``kernels_by_source(compiled)`` says
-which source lines they come from.
+device streams, so there the profile is empty. ``fused_computations(hlo)`` counts the
+kernels XLA generates code for, on any backend, and ``kernels_by_source(hlo)`` says which
+source lines they come from (``hlo``: a compiled program's ``as_text()``, which can be
+megabytes, so a caller dumps it once for both).
 """
 from __future__ import annotations
 
@@ -25,10 +26,10 @@ from typing import Callable
 import jax
 
 
-def fused_computations(compiled) -> int:
-    """The fused computations of a compiled program's optimized HLO: the kernels XLA
+def fused_computations(hlo: str) -> int:
+    """The fused computations of a compiled program's optimized HLO text: the kernels XLA
     generates code for, what its compile time follows."""
-    return len(re.findall(r"^%fused\S* ", compiled.as_text(), re.M))
+    return len(re.findall(r"^%fused\S* ", hlo, re.M))
 
 
 def kernel_profile(call: Callable[[], object], repeats: int = 3, top: int = 8) -> dict:
@@ -118,16 +119,16 @@ def _source_lines(text: str) -> dict:
     return {frame: chain(frame) for frame in parents}
 
 
-def kernels_by_source(compiled, package: str = "/smjax/") -> collections.Counter:
-    """A compiled program's launches (fusions and unfused kernels of every computation
-    that is not itself fused) counted by source line: the innermost frame in ``package``
-    (else the innermost frame at all), as ``path:line function``. Each launch counts once
-    however often its loop runs; XLA names no source for some (copies it inserts)."""
-    text = compiled.as_text()
-    called = set(re.findall(r"(?:calls|to_apply)=%([^,\s}]+)", text))
-    frames = _source_lines(text)
+def kernels_by_source(hlo: str, package: str = "/smjax/") -> collections.Counter:
+    """A compiled program's launches, from its optimized HLO text (fusions and unfused
+    kernels of every computation that is not itself fused), counted by source line: the
+    innermost frame in ``package`` (else the innermost frame at all), as ``path:line
+    function``. Each launch counts once however often its loop runs; XLA names no source
+    for some (copies it inserts)."""
+    called = set(re.findall(r"(?:calls|to_apply)=%([^,\s}]+)", hlo))
+    frames = _source_lines(hlo)
     counts: collections.Counter = collections.Counter()
-    for computation in re.split(r"\n(?=\S)", text):
+    for computation in re.split(r"\n(?=\S)", hlo):
         name = re.match(r"(?:ENTRY )?%(\S+)", computation)
         if not name or name.group(1) in called:
             continue

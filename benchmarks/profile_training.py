@@ -55,7 +55,8 @@ def _median_time(fn, args, repeats: int, kernels: bool = False, fusions: bool = 
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(*args).compile()
     compile_s = time.perf_counter() - t0
-    fused = (fused_computations(compiled), kernels_by_source(compiled)) if fusions else None
+    hlo = compiled.as_text() if fusions else ""
+    fused = (fused_computations(hlo), kernels_by_source(hlo)) if fusions else None
     jax.block_until_ready(compiled(*args))
     runs = []
     for _ in range(repeats):

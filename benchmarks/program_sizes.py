@@ -43,10 +43,10 @@ PHASES = ("PjRtCpuClient::Compile", "HLO passes through layout assignment",
 def hlo_sizes(lowered, compiled) -> dict:
     """Operations of the StableHLO; instructions and fused computations of the optimized
     HLO."""
+    hlo = compiled.as_text()
     return {"stablehlo_ops": len(re.findall(r"\bstablehlo\.[a-z_]+", lowered.as_text())),
-            "hlo_instructions": len(re.findall(r"^\s+(?:ROOT )?%\S+ = ", compiled.as_text(),
-                                               re.M)),
-            "fusions": fused_computations(compiled)}
+            "hlo_instructions": len(re.findall(r"^\s+(?:ROOT )?%\S+ = ", hlo, re.M)),
+            "fusions": fused_computations(hlo)}
 
 
 def traced(fn):
