@@ -1,5 +1,6 @@
 """A learner per option updated at the price of one (``Agent.update_options``): the same
 result as each option's own update, each option from its own decisions only."""
+import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -117,3 +118,29 @@ def test_the_grouped_update_is_chosen_by_backend_unless_named():
     # fill, one partly filled block per option; or as named
     assert blocks_per_step(3, 1024, 128, 5) == 3
     assert blocks_per_step(0, 1024, 128, 5) == (1 if jax.default_backend() == "cpu" else 13)
+
+
+@pytest.mark.parametrize("block,per_step", [(1, 1), (3, 1), (128, 1), (3, 4)])
+def test_the_values_on_the_decisions_are_those_each_option_acts_with(block, per_step):
+    # option_values gives each option's critic where that option decided (0 elsewhere,
+    # and for an option that never decides), as its act gives them
+    agent = make_agent("ppo", hidden_sizes=(16, 16), option_block=block,
+                       option_blocks_per_step=per_step)
+    traj, states = _record(block), _states(agent, block)
+    values = jax.jit(agent.option_values)(states, traj.obs, traj.decision)
+    chex.assert_shape(values, (T, B, O))
+    chex.assert_tree_all_finite(values)
+    masks = jnp.ones((B, A), bool)
+    acted = jax.vmap(lambda t: jax.vmap(agent.act, (0, None, None, None))(
+        states, traj.obs[t], masks, jax.random.PRNGKey(0)).value)(jnp.arange(T))  # [T, O, B]
+    want = jnp.where(traj.decision, jnp.swapaxes(acted, 1, 2), 0.0)
+    assert int(traj.decision.sum()) > 20 and not np.asarray(values[:, :, IDLE]).any()
+    np.testing.assert_allclose(np.asarray(values), np.asarray(want), rtol=1e-5, atol=1e-6)
+
+
+def test_only_a_critic_apart_from_the_actor_is_left_to_option_values():
+    assert make_agent("ppo").option_values is not None
+    for config in (dict(shared_torso=True), dict(torso="conv"), dict(recurrent_size=4),
+                   dict(option_update="per_option")):
+        assert make_agent("ppo", **config).option_values is None, config
+    assert make_agent("actor-critic").option_values is None

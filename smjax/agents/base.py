@@ -25,6 +25,11 @@ An ``Agent`` is a bundle of pure functions closed over the learner's config:
   (``smjax.agents.option_batch``), each option from its own decisions only, with the
   same results as ``update`` option by option; its work follows the decisions in the
   batch. None: ``option_batch.each_option(update)`` runs ``update`` once per option
+* ``option_values(states, obs[T, B], decision[T, B, O]) -> value[T, B, O]`` (optional):
+  every option's ``ActOutput.value`` on its own decisions of a joint rollout (0 elsewhere),
+  with work that follows the decisions. Where given, a joint rollout records no value and
+  these fill them in before the update (a learner whose critic runs apart from its actor
+  saves running every option's critic at every tick)
 * ``hidden_size``: 0 for a memoryless policy. A *recurrent* learner (``hidden_size`` H > 0)
   carries a memory ``h [B, H]`` from each of its decisions to its next one:
   ``act(state, obs, mask, key, h) -> (ActOutput, h')`` and
@@ -62,6 +67,7 @@ class Agent(NamedTuple):
     warm_start: Callable[[Any, Any], Any] = lambda state, params: state.replace(params=params)
     hidden_size: int = 0
     update_options: Callable[..., tuple[Any, dict]] | None = None
+    option_values: Callable[..., jax.Array] | None = None
 
 
 def hyper_params(config: Any) -> dict[str, jax.Array]:

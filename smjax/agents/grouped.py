@@ -9,7 +9,7 @@ blocks there are (a traced count) are done, so the work follows the rows there a
 (plus at most one padded block per option), not a static worst case. Under ``vmap``
 (seeds) the loop runs as often as the seed with the most blocks needs.
 ``grouped_sums`` is the same loop for values that need no gradient (a forward pass over
-the rows).
+the rows), ``grouped_rows`` for a value per row.
 
 A pass of the loop takes one block on a CPU and several at once on an accelerator
 (``blocks_per_step``): a CPU pays for the work, an accelerator for each pass's kernel
@@ -76,6 +76,20 @@ def grouped_sums(block_values: Callable, params: Any, counts: jax.Array, block: 
     only reads the networks, at the price of a forward pass over the rows there are."""
     init = _zero_sums(block_values, params, counts, block)
     return _block_loop(block_values, params, counts, block, init, per_step)
+
+
+def grouped_rows(block_values: Callable, params: Any, counts: jax.Array, block: int,
+                 size: int, per_step: int = 1) -> jax.Array:
+    """float [O, size]: ``block_values(option_params, o, rows, valid) -> [block]`` at each
+    option's own positions ``rows`` (0 past its count): a per-row forward pass over the rows
+    there are, as ``grouped_sums`` is a summed one."""
+    def placed(own, o, j, valid):
+        values = jnp.where(valid, block_values(own, o, j, valid), 0.0).astype(jnp.float32)
+        return jax.lax.dynamic_update_slice(jnp.zeros((size + block,), jnp.float32), values,
+                                            (j[0],))
+
+    init = jnp.zeros((counts.shape[0], size + block), jnp.float32)
+    return _block_loop(placed, params, counts, block, init, per_step)[:, :size]
 
 
 def _zero_sums(block_values: Callable, params: Any, counts: jax.Array, block: int) -> dict:

@@ -38,7 +38,7 @@ from smjax.agents.networks import (
     take_action,
     torso_grids,
 )
-from smjax.agents.ppo_options import make_update_options
+from smjax.agents.ppo_options import make_option_values, make_update_options
 from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, finish, kl_stop,
                                      loss_terms)
 
@@ -274,7 +274,8 @@ def make_agent(config: PPOConfig | None = None, layout=()) -> Agent:
     grouped = config.option_update != "per_option"
     return Agent("ppo", init, act, update, policy_logits,
                  update_options=make_update_options(config, network_for, optimizer,
-                                                    config.option_block) if grouped else None)
+                                                    config.option_block) if grouped else None,
+                 option_values=make_option_values(config, network_for) if grouped else None)
 
 
 def ppo_loss(config: PPOConfig, network_for, params, batch, hp):

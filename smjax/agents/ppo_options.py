@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import optax
 
 from smjax.agents.base import scale_by_lr
-from smjax.agents.grouped import blocks_per_step, grouped_grads
+from smjax.agents.grouped import blocks_per_step, grouped_grads, grouped_rows
 from smjax.agents.networks import flatten_obs
 from smjax.agents.option_batch import OptionBatch
 from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, finish, kl_stop,
@@ -86,3 +86,37 @@ def make_update_options(config, network_for, optimizer, block: int):
                                 episodes, data)
 
     return update_options
+
+
+def make_option_values(config, network_for):
+    """``option_values(states, obs, decision) -> value [T, B, O]``: every option's critic on
+    its own decisions of a joint rollout (``obs [T, B, ...]`` shared, ``decision [T, B, O]``),
+    0 elsewhere; the values its ``act`` gives there, with the same parameters. None where
+    the critic shares the actor's work (a shared or convolutional torso): it runs anyway.
+
+    Why: in a joint rollout every option acts at every tick, but a value is read only
+    where the option decided (``decision_data``), about one option in five on Craft. The
+    rollout then runs every option's actor alone, and the critics run here on the
+    decisions, grouped by option (``smjax.agents.grouped``)."""
+    if config.torso != "mlp" or config.shared_torso:
+        return None
+    block = config.option_block
+
+    def option_values(states, obs: jax.Array, decision: jax.Array) -> jax.Array:
+        T, B, O = decision.shape
+        mine = decision.reshape(T * B, O).T                          # [O, T*B]
+        order = jnp.argsort(~mine, axis=1, stable=True)             # each option's decisions first
+        counts = mine.sum(1).astype(jnp.int32)
+        table = obs.reshape((T * B,) + obs.shape[2:])
+        network = network_for(states.params["params"]["policy_head"]["kernel"].shape[-1])
+
+        def block_values(own, o, j, valid):
+            rows = order[o, jnp.minimum(j, T * B - 1)]
+            return network.apply(own, flatten_obs(table[rows]))[1]
+
+        per_step = blocks_per_step(config.option_blocks_per_step, T * B, block, O)
+        ranked = grouped_rows(block_values, states.params, counts, block, T * B, per_step)
+        values = jnp.take_along_axis(ranked, jnp.argsort(order, axis=1), axis=1)
+        return jnp.where(mine, values, 0.0).T.reshape(T, B, O)
+
+    return option_values

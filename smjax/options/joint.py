@@ -12,7 +12,8 @@ learner would have recorded had it been the only learner:
   (``satisfied`` while it is on the stack), plus its side-cost shaping where on;
 * ``done``: the option's run ended in this tick (it was on the stack before the pops and
   is not after them), or the episode did;
-* ``action``, ``log_prob``, ``value``, ``action_mask``: its own.
+* ``action``, ``log_prob``, ``value``, ``action_mask``: its own (``value`` 0 until the
+  update fills it in where the agent gives ``option_values``).
 
 * ``discount``: the tick's discount at the option's own gamma, the one its level trained
   its values at (``TrainConfig.levels``: Fetch's recipe trains its root at 0.99 and its
@@ -76,6 +77,11 @@ def option_transitions(obs: jax.Array, acts: ActOutput, masks: jax.Array, chose:
 def every_option_acts(agent, learners, obs: jax.Array, masks: jax.Array,
                       key: jax.Array) -> ActOutput:
     """Every option's exploring choice [O, B] from its own learner (``learners``: leading
-    axis O; ``masks`` [B, O, A]), each with its own key."""
+    axis O; ``masks`` [B, O, A]), each with its own key. Where the agent gives
+    ``option_values``, the values are left 0 (so its critics do not run here): the update
+    fills them in on the decisions alone."""
     keys = jax.random.split(key, masks.shape[1])
-    return jax.vmap(agent.act, (0, None, 1, 0))(learners, obs, masks, keys)
+    acts = jax.vmap(agent.act, (0, None, 1, 0))(learners, obs, masks, keys)
+    if agent.option_values is not None:
+        acts = acts._replace(value=jnp.zeros_like(acts.value))
+    return acts

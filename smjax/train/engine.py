@@ -245,7 +245,11 @@ class Engine:
 
     def _learn_joint(self, learners, carry: EnvCarry, traj, key):
         """Every option's update on its own rows of the rollout and pending decisions
-        (``carry.pending``: axis O), in one ``update_options`` (the agent's, or per option)."""
+        (``carry.pending``: axis O), in one ``update_options`` (the agent's, or per option);
+        values the rollout left to ``option_values`` first, before pending rows carry them."""
+        if self.agent.option_values is not None:
+            traj = traj._replace(value=self.agent.option_values(learners, traj.obs,
+                                                                traj.decision))
         batch, pending = joint_batch(carry.pending, traj)
         learners, metrics = options_update(self.joint_agent)(learners, batch, key)
         return learners, carry.replace(pending=pending), metrics
