@@ -40,7 +40,7 @@ from smjax.agents.networks import (
 )
 from smjax.agents.ppo_options import make_option_values, make_update_options
 from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, finish, kl_stop,
-                                     loss_terms)
+                                     loss_terms, num_actions_of)
 
 
 @dataclass(frozen=True)
@@ -152,10 +152,6 @@ def init_policy_gradient_state(network_for, optimizer, key, example_obs, num_act
     params = network.init(key, *inputs)
     zero = jnp.zeros((), jnp.int32)
     return PolicyGradientState(params, optimizer.init(params), zero, zero, zero, zero, hp)
-
-
-def num_actions_of(params) -> int:
-    return params["params"]["policy_head"]["kernel"].shape[-1]
 
 
 def sample_actions(network_for, params, obs, mask, key, epsilon=None) -> ActOutput:

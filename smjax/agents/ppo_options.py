@@ -20,7 +20,7 @@ from smjax.agents.grouped import blocks_per_step, grouped_grads, grouped_rows
 from smjax.agents.networks import flatten_obs
 from smjax.agents.option_batch import OptionBatch
 from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, finish, kl_stop,
-                                     loss_terms, weighted_sum)
+                                     loss_terms, num_actions_of, weighted_sum)
 
 
 def make_update_options(config, network_for, optimizer, block: int):
@@ -108,7 +108,7 @@ def make_option_values(config, network_for):
         order = jnp.argsort(~mine, axis=1, stable=True)             # each option's decisions first
         counts = mine.sum(1).astype(jnp.int32)
         table = obs.reshape((T * B,) + obs.shape[2:])
-        network = network_for(states.params["params"]["policy_head"]["kernel"].shape[-1])
+        network = network_for(num_actions_of(states.params))
 
         def block_values(own, o, j, valid):
             rows = order[o, jnp.minimum(j, T * B - 1)]

@@ -38,6 +38,12 @@ def decision_order(key: jax.Array, decision: jax.Array) -> jax.Array:
     return (jnp.sort(packed) & ((1 << index_bits) - 1)).astype(jnp.int32)
 
 
+def num_actions_of(params) -> int:
+    """The actions a policy network's parameters score (its policy head's outputs; a
+    leading axis of stacked parameters leaves it as it is)."""
+    return params["params"]["policy_head"]["kernel"].shape[-1]
+
+
 def decision_data(config, traj: Transition, hp) -> tuple[tuple, jax.Array]:
     """What the loss reads of a rollout ``[T, B]``, apart from the observations:
     ``(action, mask, old log-prob, old value, advantage, return, decision)``, the
