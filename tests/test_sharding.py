@@ -1,4 +1,4 @@
-"""Seeds sharded over 4 (virtual CPU) devices give the numbers of a single-device run."""
+"""Seeds sharded over (virtual CPU) devices give the numbers of a single-device run."""
 import json
 import os
 import subprocess
@@ -35,11 +35,12 @@ def _run(devices: int, seeds: list[int]) -> dict:
 
 
 def test_seed_sharding_matches_single_device():
-    one = _run(1, [0, 1, 2, 3])
-    four = _run(4, [0, 1, 2, 3])
-    assert one["devices"] == 1 and four["devices"] == 4
-    assert four["levels"] == one["levels"]
-    assert four["final"] == one["final"] and four["finetune"] == one["finetune"]
+    # a seed on each device, against both seeds on one device
+    one = _run(1, [0, 1])
+    two = _run(2, [0, 1])
+    assert one["devices"] == 1 and two["devices"] == 2
+    assert two["levels"] == one["levels"]
+    assert two["final"] == one["final"] and two["finetune"] == one["finetune"]
     assert min(one["finetune"]["episodes"]) > 0  # every seed reached its fine-tuning turns
 
 

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from smjax.core.timeline import Timeline
@@ -116,10 +117,38 @@ def test_a_repeated_run_loads_its_programs_untraced_and_a_changed_one_does_not(t
     # program, only the config's key: test_a_program_key_changes_with_everything_...)
     other = _train(tmp_path / "b", cache, "--set", "eval_envs=16")
     assert other["loaded"] == 0 and other["misses"] > 0, other
-    # a damaged entry is dropped and the program traced again, with the same results
-    saved[0].write_bytes(b"not a program")
-    third = _train(tmp_path / "a", cache)
-    assert third["loaded"] == len(saved) - 1 and third["final"] == first["final"]
+
+
+def test_a_damaged_saved_program_is_dropped_and_traced_again(tmp_path, monkeypatch):
+    import jax
+    import jax.numpy as jnp
+
+    from smjax.train import program_cache as pc
+
+    monkeypatch.setattr(pc, "_directory", lambda: tmp_path / "smjax-programs")
+    saved = []  # a program is saved where it was traced (exported), never where loaded
+    save = pc._save
+    monkeypatch.setattr(pc, "_save", lambda *a: (saved.append(a[0]), save(*a)))
+    jitted = jax.jit(lambda x, y: {"sum": x + y["b"], "scaled": 2.0 * x})
+    args = (jnp.arange(3.0), {"b": jnp.ones(3)})
+    expected = {"sum": np.arange(3.0) + 1.0, "scaled": 2.0 * np.arange(3.0)}
+    identity = {"task": "craft/get_wood", "gamma": 0.9}
+
+    def compiled_and_run():
+        out = pc.compile_program(jitted, args, "chunk", identity)(*args)
+        assert jax.tree.all(jax.tree.map(np.array_equal, out, expected))
+
+    compiled_and_run()
+    [entry] = (tmp_path / "smjax-programs").iterdir()
+    assert saved == [entry]
+    compiled_and_run()  # loaded, not traced
+    assert saved == [entry]
+    for damage in (b"not a program", entry.read_bytes()[:40]):  # garbage, a cut-off write
+        entry.write_bytes(damage)
+        saved.clear()
+        compiled_and_run()
+        assert saved == [entry] and pc._load(entry) is not None  # traced, saved anew whole
+
 
 
 def test_a_program_key_changes_with_everything_the_program_depends_on(monkeypatch):
