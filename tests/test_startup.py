@@ -120,6 +120,9 @@ def test_a_repeated_run_loads_its_programs_untraced_and_a_changed_one_does_not(t
 
 
 def test_a_damaged_saved_program_is_dropped_and_traced_again(tmp_path, monkeypatch):
+    """Every saved program a run loads goes through ``compile_program``: a damaged entry
+    (garbage, or a write cut off) is dropped, the program traced and saved again, and it
+    gives the same numbers."""
     import jax
     import jax.numpy as jnp
 
@@ -148,7 +151,6 @@ def test_a_damaged_saved_program_is_dropped_and_traced_again(tmp_path, monkeypat
         saved.clear()
         compiled_and_run()
         assert saved == [entry] and pc._load(entry) is not None  # traced, saved anew whole
-
 
 
 def test_a_program_key_changes_with_everything_the_program_depends_on(monkeypatch):
