@@ -19,8 +19,8 @@ from smjax.agents.base import scale_by_lr
 from smjax.agents.grouped import blocks_per_step, grouped_grads, grouped_rows
 from smjax.agents.networks import flatten_obs
 from smjax.agents.option_batch import OptionBatch
-from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, finish, kl_stop,
-                                     loss_terms, num_actions_of, weighted_sum)
+from smjax.agents.ppo_update import (apply_if, decision_data, decision_order, decisions_first,
+                                     finish, kl_stop, loss_terms, num_actions_of, weighted_sum)
 
 
 def make_update_options(config, network_for, optimizer, block: int):
@@ -105,7 +105,7 @@ def make_option_values(config, network_for):
     def option_values(states, obs: jax.Array, decision: jax.Array) -> jax.Array:
         T, B, O = decision.shape
         mine = decision.reshape(T * B, O).T                          # [O, T*B]
-        order = jnp.argsort(~mine, axis=1, stable=True)             # each option's decisions first
+        order = jax.vmap(decisions_first)(mine)                      # each option's decisions first
         counts = mine.sum(1).astype(jnp.int32)
         table = obs.reshape((T * B,) + obs.shape[2:])
         network = network_for(num_actions_of(states.params))
@@ -116,7 +116,8 @@ def make_option_values(config, network_for):
 
         per_step = blocks_per_step(config.option_blocks_per_step, T * B, block, O)
         ranked = grouped_rows(block_values, states.params, counts, block, T * B, per_step)
-        values = jnp.take_along_axis(ranked, jnp.argsort(order, axis=1), axis=1)
+        rank = jnp.maximum(jnp.cumsum(mine, axis=1) - 1, 0)          # a decision's place in order
+        values = jnp.take_along_axis(ranked, rank, axis=1)
         return jnp.where(mine, values, 0.0).T.reshape(T, B, O)
 
     return option_values

@@ -33,8 +33,21 @@ def decision_order(key: jax.Array, decision: jax.Array) -> jax.Array:
         noise = jax.random.uniform(key, decision.shape)
         return jnp.argsort(jnp.where(decision, noise, noise + 2.0))
     noise = jax.random.bits(key, decision.shape, jnp.uint32) >> (32 - noise_bits)
+    return _sorted_by_packed_key(decision, noise, index_bits)
+
+
+def decisions_first(decision: jax.Array) -> jax.Array:
+    """int ``[N]``: the decisions in their own order, then the other items: the one-operand
+    sort of ``decision_order`` with no noise."""
+    index_bits = max(1, (decision.shape[0] - 1).bit_length())
+    return _sorted_by_packed_key(decision, jnp.zeros(decision.shape, jnp.uint32), index_bits)
+
+
+def _sorted_by_packed_key(decision: jax.Array, noise: jax.Array, index_bits: int) -> jax.Array:
+    """The items' indices ordered by (not a decision, ``noise``, index): one uint32 key per
+    item, sorted alone, the index read back from its low ``index_bits`` bits."""
     packed = (((~decision).astype(jnp.uint32) << 31) | (noise << index_bits)
-              | jnp.arange(n, dtype=jnp.uint32))
+              | jnp.arange(decision.shape[0], dtype=jnp.uint32))
     return (jnp.sort(packed) & ((1 << index_bits) - 1)).astype(jnp.int32)
 
 
