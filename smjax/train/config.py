@@ -243,6 +243,30 @@ class TrainConfig:
 # resume may change them (the output directory and progress bars are not config fields)
 RUN_SETTINGS = ("tensorboard", "checkpoint_every")
 
+# fields no compiled program depends on: the host reads them between chunks (budgets,
+# thresholds, stopping rules, how often to gate, what to evaluate), or the programs take them
+# as inputs (the episodes' tick caps, a seed's side cost and whether its episodes go on). A
+# run that differs from an earlier one only in these loads that run's saved programs
+# untraced (smjax.train.program_cache); tests/test_startup.py checks that changing all of
+# them leaves every saved program's text as it was.
+OUTSIDE_PROGRAMS = RUN_SETTINGS + (
+    "threshold", "ceiling_fraction", "max_episodes_per_level", "max_steps_per_level",
+    "gate_interval", "gate_max_ticks", "eval_max_ticks", "eval_policies", "continue_episodes",
+    "level_side_cost_weight", "finetune_threshold", "finetune_option_threshold",
+    "finetune_turn_episodes", "finetune_max_rest", "finetune_continue_episodes",
+    "finetune_max_episodes", "finetune_plateau_episodes", "finetune_plateau_gain",
+    "finetune_side_cost_weight")
+
+
+def program_config(cfg: TrainConfig) -> dict:
+    """``cfg.to_dict()`` without ``OUTSIDE_PROGRAMS``, in ``levels`` too: what a run's
+    compiled programs depend on of its config."""
+    fields = {k: v for k, v in cfg.to_dict().items() if k not in OUTSIDE_PROGRAMS}
+    levels = {name: {k: v for k, v in level.items() if k not in OUTSIDE_PROGRAMS}
+              for name, level in fields.get("levels", {}).items()}
+    fields["levels"] = {name: level for name, level in levels.items() if level}
+    return fields
+
 
 def resolve_config(base: TrainConfig | None = None, *, saved_run: dict | None = None,
                    file: str | Path | None = None, sets: dict | None = None,

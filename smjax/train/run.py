@@ -12,7 +12,8 @@ from smjax.core.registry import make
 from smjax.core.timeline import TIMELINE
 from smjax.train import checkpoint as ckpt
 from smjax.train import distributed as dist
-from smjax.train.config import RUN_SETTINGS, ConfigError, TrainConfig, config_differences
+from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_differences,
+                                program_config)
 from smjax.train.engine import Engine
 from smjax.train.learner import make_joint_learner, make_learner
 from smjax.options.hierarchy import Hierarchy
@@ -151,6 +152,15 @@ class Outputs(NamedTuple):
     progress: bool = True         # the progress bar (process 0)
 
 
+def _program_identity(task, cfg: TrainConfig, identity: dict) -> dict:
+    """The run's identity as its programs see it: the config fields they depend on
+    (``program_config``), with the task, environment overrides, declared hierarchy and
+    sweep; a run that changes only a budget or a threshold loads the same programs."""
+    config = cfg.to_dict()
+    kept = {k: v for k, v in identity.items() if k not in config}
+    return kept | {"task_name": task, "config": program_config(cfg)}
+
+
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
                 env_overrides: dict, resume: bool, sweep: dict | None,
                 given: Hierarchy | None = None, resume_from: str | None = None) -> dict:
@@ -181,7 +191,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
             check_fits(env, env_params, cfg, len(slot_seeds))
             engine = Engine(env, env_params, resolved.hierarchy, agent, cfg, joint_agent)
             engine.program_identity = cacheable_identity(
-                task, given, identity | {"task_name": task, "config": cfg.to_dict()})
+                task, given, _program_identity(task, cfg, identity))
             hooks = default_hooks(cfg, out_dir, outputs.progress, identity)
             if out_dir is not None:  # the run's files, before the caller's hooks read them
                 hooks.append(ResultsHook(
