@@ -1,6 +1,7 @@
 """A run's saved programs are keyed by the config fields its programs depend on: a run that
 changes only a budget, a threshold, a stopping rule or a logging setting
-(``OUTSIDE_PROGRAMS``) compiles the very same programs, so it may load an earlier run's
+(``OUTSIDE_PROGRAMS``), or a learner's traced hyper-parameter (only the learners' init
+depends on those), compiles the very same programs, so it may load an earlier run's
 untraced (tests/test_startup.py runs it from the command line)."""
 import hashlib
 import json
@@ -66,8 +67,14 @@ def test_changing_every_field_outside_the_programs_leaves_every_program_as_it_wa
     before = _program_texts(base, monkeypatch, tmp_path)
     # the level chunk, joint fine-tuning's, the episodes program, the learners' init and the
     # environments' reset: the same texts under the same keys
-    assert {"chunk", "joint_chunk", "episodes-8"} <= set(before) and len(before) >= 5, before
-    after = _program_texts(base.replace(**CHANGED), monkeypatch, tmp_path)
+    assert {"chunk", "joint_chunk", "episodes-8", "init"} <= set(before), sorted(before)
+    assert len(before) >= 5, sorted(before)
+    # and a learner's traced hyper-parameters, which only the init's state holds (the init
+    # reads nothing else of the config but the learner's settings)
+    hyper = {"agent": {"learning_rate": 2e-3, "ent_coef": 0.02, "clip_eps": 0.3},
+             "finetune_agent": {"learning_rate": 2e-4}}
+    after = _program_texts(base.replace(**CHANGED, **hyper), monkeypatch, tmp_path)
+    assert after.pop("init") != before.pop("init")
     assert after == before
-    results = json.loads((tmp_path / "results.json").read_text())
-    assert results["config"]["threshold"] == 0.5  # the changed run, not the first one again
+    config = json.loads((tmp_path / "results.json").read_text())["config"]
+    assert config["threshold"] == 0.5 and config["agent"]["learning_rate"] == 2e-3

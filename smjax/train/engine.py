@@ -107,10 +107,14 @@ class Engine:
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
         self.program_identity: dict | None = None
+        # the learners' init writes the traced hyper-parameters into their state, so its
+        # identity holds their values too
+        self.init_identity: dict | None = None
         # the start-up's programs, loaded untraced by a repeated run (as the chunks are)
         saved = functools.partial(SavedOnFirstCall, identity_of=lambda: self.program_identity)
-        self._init = saved(jax.jit(seeds(lambda k: agent.init(k, self.example_obs,
-                                                              self.num_actions))), "init")
+        self._init = SavedOnFirstCall(
+            jax.jit(seeds(lambda k: agent.init(k, self.example_obs, self.num_actions))),
+            "init", identity_of=lambda: self.init_identity)
         if self.joint_agent is not agent:
             check_same_state(agent, self.joint_agent, self.example_obs, self.num_actions)
         # host-side array plumbing as one program each, not one tiny program per leaf

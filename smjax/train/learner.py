@@ -37,6 +37,18 @@ def update_fields(cfg: TrainConfig) -> dict:
     return {k: v for k, v in cfg.fine_tuning.agent.items() if k in static}
 
 
+def agent_fields_in_programs(cfg: TrainConfig) -> dict:
+    """``cfg.agent`` and ``cfg.finetune_agent`` without their traced hyper-parameters: what
+    the training and episodes programs depend on of them. Those read traced values from the
+    learner's state; only the learners' init, which writes them there, depends on them."""
+    from smjax.agents import default_config
+    from smjax.agents.config import traced_fields
+
+    traced = set(traced_fields(default_config(cfg.algo)))
+    return {"agent": {k: v for k, v in cfg.agent.items() if k not in traced},
+            "finetune_agent": update_fields(cfg)}
+
+
 def make_joint_learner(env, env_params, cfg: TrainConfig, agent):
     """The learner whose update joint fine-tuning runs: ``agent``, or where
     ``cfg.finetune_agent`` sets update settings (:func:`update_fields`), ``agent`` built

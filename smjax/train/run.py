@@ -15,7 +15,7 @@ from smjax.train import distributed as dist
 from smjax.train.config import (RUN_SETTINGS, ConfigError, TrainConfig, config_differences,
                                 program_config)
 from smjax.train.engine import Engine
-from smjax.train.learner import make_joint_learner, make_learner
+from smjax.train.learner import agent_fields_in_programs, make_joint_learner, make_learner
 from smjax.options.hierarchy import Hierarchy
 from smjax.train.hooks import Hook, ResultsReport
 from smjax.train.loop import HierarchyTrainer, NonFiniteError, default_hooks
@@ -152,13 +152,18 @@ class Outputs(NamedTuple):
     progress: bool = True         # the progress bar (process 0)
 
 
-def _program_identity(task, cfg: TrainConfig, identity: dict) -> dict:
+def _program_identity(task, cfg: TrainConfig, identity: dict, init: bool = False) -> dict:
     """The run's identity as its programs see it: the config fields they depend on
-    (``program_config``), with the task, environment overrides, declared hierarchy and
-    sweep; a run that changes only a budget or a threshold loads the same programs."""
+    (``program_config``; of the learner's settings, no traced hyper-parameter but in the
+    learners' ``init``), with the task, environment overrides, declared hierarchy and sweep.
+    A run that changes only a budget, a threshold or a learning rate loads the same
+    programs (the init aside)."""
     config = cfg.to_dict()
     kept = {k: v for k, v in identity.items() if k not in config}
-    return kept | {"task_name": task, "config": program_config(cfg)}
+    fields = program_config(cfg)
+    if not init:
+        fields |= agent_fields_in_programs(cfg)
+    return kept | {"task_name": task, "config": fields}
 
 
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
@@ -192,6 +197,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
             engine = Engine(env, env_params, resolved.hierarchy, agent, cfg, joint_agent)
             engine.program_identity = cacheable_identity(
                 task, given, _program_identity(task, cfg, identity))
+            engine.init_identity = cacheable_identity(
+                task, given, _program_identity(task, cfg, identity, init=True))
             hooks = default_hooks(cfg, out_dir, outputs.progress, identity)
             if out_dir is not None:  # the run's files, before the caller's hooks read them
                 hooks.append(ResultsHook(
