@@ -61,8 +61,7 @@ def _program_texts(cfg: TrainConfig, monkeypatch, tmp_path) -> dict:
 
 def test_changing_every_field_outside_the_programs_leaves_every_program_as_it_was(
         monkeypatch, tmp_path):
-    # (joint fine-tuning, the default: every large program; each field was also checked
-    # alone, and in turns, where the turns' fields are read)
+    # (joint fine-tuning, the default, compiles every large program)
     base = TrainConfig(**TINY)
     before = _program_texts(base, monkeypatch, tmp_path)
     # the level chunk, joint fine-tuning's, the episodes program, the learners' init and the

@@ -247,8 +247,8 @@ RUN_SETTINGS = ("tensorboard", "checkpoint_every")
 # thresholds, stopping rules, how often to gate, what to evaluate), or the programs take them
 # as inputs (the episodes' tick caps, a seed's side cost and whether its episodes go on). A
 # run that differs from an earlier one only in these loads that run's saved programs
-# untraced (smjax.train.program_cache); tests/test_startup.py checks that changing all of
-# them leaves every saved program's text as it was.
+# untraced (smjax.train.program_cache); tests/test_program_identity.py checks that changing
+# all of them leaves every saved program's text as it was.
 OUTSIDE_PROGRAMS = RUN_SETTINGS + (
     "threshold", "ceiling_fraction", "max_episodes_per_level", "max_steps_per_level",
     "gate_interval", "gate_max_ticks", "eval_max_ticks", "eval_policies", "continue_episodes",
