@@ -107,11 +107,11 @@ class Engine:
         # what keys this engine's programs in the program cache (None: not cached); the
         # run sets it where the task and config name everything the programs depend on
         self.program_identity: dict | None = None
-        # the learners' init writes the traced hyper-parameters into their state, so its
-        # identity holds their values too
+        # the learners' init's: the program identity and the traced hyper-parameters' values,
+        # which the init writes into the learners' state
         self.init_identity: dict | None = None
-        # the start-up's programs, loaded untraced by a repeated run (as the chunks are)
-        saved = functools.partial(SavedOnFirstCall, identity_of=lambda: self.program_identity)
+        # the start-up's programs (the init, the reset below), loaded untraced by a repeated
+        # run as the chunks are
         self._init = SavedOnFirstCall(
             jax.jit(seeds(lambda k: agent.init(k, self.example_obs, self.num_actions))),
             "init", identity_of=lambda: self.init_identity)
@@ -124,7 +124,8 @@ class Engine:
             self._copies_per_option(learners), bank))
         # jitted, so it also slices a bank sharded over processes
         self._bank_entry0 = jax.jit(lambda bank: jax.tree.map(lambda p: p[:, 0], bank))
-        self.reset = saved(jax.jit(jax.vmap(self._reset)), "reset")  # keys [S], start ids [S]
+        self.reset = SavedOnFirstCall(jax.jit(jax.vmap(self._reset)), "reset",  # keys, starts [S]
+                                      identity_of=lambda: self.program_identity)
         # the same episodes for a new learner (a fine-tuning turn's): leading axis S
         self.hand_over = jax.jit(jax.vmap(self.runner.hand_over))
 

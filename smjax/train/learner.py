@@ -29,24 +29,24 @@ def update_fields(cfg: TrainConfig) -> dict:
     """The fields of ``cfg.finetune_agent`` that are not traced hyper-parameters: settings
     of the learner's update (its epochs, its minibatches) that joint fine-tuning's update
     is built with instead of ``cfg.agent``'s."""
-    from smjax.agents import default_config
-    from smjax.agents.config import traced_fields
-
-    config = default_config(cfg.algo)
-    static = {f.name for f in dataclasses.fields(config)} - set(traced_fields(config))
-    return {k: v for k, v in cfg.fine_tuning.agent.items() if k in static}
+    return _static_settings(cfg.algo, cfg.fine_tuning.agent)
 
 
 def agent_fields_in_programs(cfg: TrainConfig) -> dict:
     """``cfg.agent`` and ``cfg.finetune_agent`` without their traced hyper-parameters: what
     the training and episodes programs depend on of them. Those read traced values from the
     learner's state; only the learners' init, which writes them there, depends on them."""
+    return {"agent": _static_settings(cfg.algo, cfg.agent), "finetune_agent": update_fields(cfg)}
+
+
+def _static_settings(algo: str, settings: dict) -> dict:
+    """``settings``' fields that ``algo``'s learner is built from (not traced)."""
     from smjax.agents import default_config
     from smjax.agents.config import traced_fields
 
-    traced = set(traced_fields(default_config(cfg.algo)))
-    return {"agent": {k: v for k, v in cfg.agent.items() if k not in traced},
-            "finetune_agent": update_fields(cfg)}
+    config = default_config(algo)
+    static = {f.name for f in dataclasses.fields(config)} - set(traced_fields(config))
+    return {k: v for k, v in settings.items() if k in static}
 
 
 def make_joint_learner(env, env_params, cfg: TrainConfig, agent):

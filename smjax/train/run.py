@@ -152,18 +152,14 @@ class Outputs(NamedTuple):
     progress: bool = True         # the progress bar (process 0)
 
 
-def _program_identity(task, cfg: TrainConfig, identity: dict, init: bool = False) -> dict:
+def _program_identity(task, cfg: TrainConfig, identity: dict) -> dict:
     """The run's identity as its programs see it: the config fields they depend on
-    (``program_config``; of the learner's settings, no traced hyper-parameter but in the
-    learners' ``init``), with the task, environment overrides, declared hierarchy and sweep.
-    A run that changes only a budget, a threshold or a learning rate loads the same
-    programs (the init aside)."""
-    config = cfg.to_dict()
-    kept = {k: v for k, v in identity.items() if k not in config}
-    fields = program_config(cfg)
-    if not init:
-        fields |= agent_fields_in_programs(cfg)
-    return kept | {"task_name": task, "config": fields}
+    (``program_config``; of the learner's settings, no traced hyper-parameter), with the
+    task, environment overrides, declared hierarchy and sweep. A run that changes only a
+    budget, a threshold or a learning rate loads the same programs."""
+    kept = {k: v for k, v in identity.items() if k not in cfg.to_dict()}
+    config = program_config(cfg) | agent_fields_in_programs(cfg)
+    return kept | {"task_name": task, "config": config}
 
 
 def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
@@ -195,10 +191,11 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
         with TIMELINE.span("memory check, engine and trainer"):
             check_fits(env, env_params, cfg, len(slot_seeds))
             engine = Engine(env, env_params, resolved.hierarchy, agent, cfg, joint_agent)
-            engine.program_identity = cacheable_identity(
-                task, given, _program_identity(task, cfg, identity))
-            engine.init_identity = cacheable_identity(
-                task, given, _program_identity(task, cfg, identity, init=True))
+            programs = cacheable_identity(task, given, _program_identity(task, cfg, identity))
+            engine.program_identity = programs
+            # the learners' init writes the traced hyper-parameters into their state
+            engine.init_identity = (None if programs is None
+                                    else programs | {"init_agent": cfg.agent})
             hooks = default_hooks(cfg, out_dir, outputs.progress, identity)
             if out_dir is not None:  # the run's files, before the caller's hooks read them
                 hooks.append(ResultsHook(
