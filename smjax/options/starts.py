@@ -47,6 +47,13 @@ class EpisodeStarts:
     def _fresh_starts(self, key: jax.Array, n: int):
         obs, state = jax.vmap(self.env.reset_env, (0, None))(jax.random.split(key, n),
                                                              self.env_params)
+        # An environment's weakly typed leaf (``t=jnp.asarray(0)``) comes back strongly
+        # typed from a checkpoint or a copy through the host: made strong here, the run's
+        # state has one type wherever it comes from, so a resumed run or a CPU's seed
+        # groups call the programs compiled for it.
+        state = jax.tree.map(
+            lambda x: x.astype(x.dtype) if getattr(jax.typeof(x), "weak_type", False) else x,
+            state)
         return self.policy_obs(obs), state
 
     def policy_obs(self, raw_obs: jax.Array) -> jax.Array:

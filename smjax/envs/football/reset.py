@@ -24,7 +24,9 @@ def kickoff_positions(kicking_team) -> jax.Array:
 
 def kickoff(state: FootballState, kicking_team) -> FootballState:
     """Reset players and ball for a kick-off taken by ``kicking_team`` (score kept)."""
-    sign = jnp.where(jnp.arange(C.NUM_TOTAL) < C.NUM_PLAYERS, 1.0, -1.0)
+    # float32, not a Python float's weak type: a state whose types change between reset
+    # and step would make a jitted step compile twice
+    sign = jnp.where(jnp.arange(C.NUM_TOTAL) < C.NUM_PLAYERS, jnp.float32(1.0), jnp.float32(-1.0))
     facing = jnp.stack([sign, jnp.zeros_like(sign)], axis=1)
     taker = C.NUM_PLAYERS * kicking_team + 1
     # The taker stands just behind the ball on the centre spot, facing the other goal.
