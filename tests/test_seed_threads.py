@@ -51,7 +51,6 @@ def test_a_run_in_seed_groups_equals_one_program_over_every_seed(monkeypatch):
     assert (one["seed_threads"], grouped["seed_threads"]) == (1, 2)
 
 
-
 def test_an_environments_weakly_typed_state_is_made_strong_where_episodes_start():
     # KeyDoor's step counter is ``jnp.asarray(0)``, weakly typed. A seed group's rows and a
     # checkpoint's arrays come back from the host strongly typed, so the run's state is made
@@ -67,6 +66,7 @@ def test_an_environments_weakly_typed_state_is_made_strong_where_episodes_start(
     carry = engine.reset(jax.random.split(jax.random.PRNGKey(0), 2), np.zeros((2,), np.int32))
     assert not [x for x in jax.tree.leaves(carry) if jax.typeof(x).weak_type]
     assert SeedGroups.for_program(2, (carry,)) is not None
+
 
 def _per_seed_program(x, shared, y):
     return {"sum": x * 2 + shared, "rows": y.sum(axis=1)}
