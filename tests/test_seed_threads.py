@@ -61,10 +61,10 @@ def test_an_environments_weakly_typed_state_is_made_strong_where_episodes_start(
 
     env, params = make_keydoor()
     _, state = jax.eval_shape(env.reset_env, jax.random.PRNGKey(0), params)
-    assert jax.typeof(state.t).weak_type
+    assert state.t.weak_type
     engine = Engine(env, params, env.hierarchies()["paper"], make_agent("ppo"), CFG)
     carry = engine.reset(jax.random.split(jax.random.PRNGKey(0), 2), np.zeros((2,), np.int32))
-    assert not [x for x in jax.tree.leaves(carry) if jax.typeof(x).weak_type]
+    assert not [x for x in jax.tree.leaves(carry) if x.weak_type]
     assert SeedGroups.for_program(2, (carry,)) is not None
 
 

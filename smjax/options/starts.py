@@ -51,9 +51,8 @@ class EpisodeStarts:
         # typed from a checkpoint or a copy through the host: made strong here, the run's
         # state has one type wherever it comes from, so a resumed run or a CPU's seed
         # groups call the programs compiled for it.
-        state = jax.tree.map(
-            lambda x: x.astype(x.dtype) if getattr(jax.typeof(x), "weak_type", False) else x,
-            state)
+        state = jax.tree.map(lambda x: x.astype(x.dtype) if getattr(x, "weak_type", False) else x,
+                             state)
         return self.policy_obs(obs), state
 
     def policy_obs(self, raw_obs: jax.Array) -> jax.Array:
