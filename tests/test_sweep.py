@@ -13,7 +13,7 @@ from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.engine import Engine
 from smjax.train.run import run
-from smjax.train.seed_threads import group_count, thread_count
+from smjax.train.seed_threads import group_count
 
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=150,
            success_window=64, gate_envs=32, eval_envs=32, finetune="off", checkpoint_every=1e9)
@@ -21,11 +21,13 @@ LRS = [1e-4, 1e-3]
 SWEEP = {"agent.learning_rate": LRS}
 
 
-def _one_group(slots: int) -> int:
-    """The seed-axis size a chunk is compiled for: a sweep's slots (points x seeds) run in
-    seed groups on one CPU device's threads, one program for a group's size."""
-    one_cpu = jax.default_backend() == "cpu" and jax.device_count() == 1
-    return -(-slots // group_count(thread_count(one_cpu), slots))
+def _one_program(lowered: list, slots: int) -> bool:
+    """One training chunk lowered, for a group of a sweep's slots (points x seeds): where
+    the engine runs seeds in groups on threads, one program serves a group's size."""
+    if len(lowered) != 1:
+        return False
+    size, threads = lowered[0]
+    return size == -(-slots // group_count(threads, slots))
 
 
 def _numbers(res: dict) -> dict:
@@ -36,17 +38,18 @@ def _numbers(res: dict) -> dict:
 
 @pytest.fixture
 def lowered(monkeypatch):
-    """The seed-axis sizes of every training chunk program lowered (= compiled)."""
+    """The seed-axis size of every training chunk program lowered (= compiled), with its
+    engine's seed threads."""
     sizes = []
     init = Engine.__init__
 
     def counting_init(self, *args, **kwargs):
         init(self, *args, **kwargs)
-        chunk = self.chunk
+        chunk, threads = self.chunk, self.seed_threads
 
         class Counting:
             def lower(_, state, *rest):
-                sizes.append(state.key.shape[0])
+                sizes.append((state.key.shape[0], threads))
                 return chunk.lower(state, *rest)
 
         self.chunk = Counting()
@@ -59,7 +62,7 @@ def test_a_sweep_compiles_once_and_each_point_equals_its_run_alone(tmp_path, low
     cfg = TrainConfig(**CFG)
     out = tmp_path / "sweep"
     swept = run(make_keydoor(), cfg, [0, 3], out, progress=False, sweep=SWEEP)
-    assert lowered == [_one_group(4)]  # 2 points x 2 seeds, one training program
+    assert _one_program(lowered, 4), lowered  # 2 points x 2 seeds, one training program
     assert [p["overrides"] for p in swept["points"]] == [{"agent.learning_rate": lr} for lr in LRS]
     on_disk = json.loads((out / "sweep.json").read_text())
     assert [p["overrides"] for p in on_disk["points"]] == [p["overrides"] for p in swept["points"]]
@@ -101,7 +104,7 @@ def test_a_gamma_sweep_point_equals_its_run_alone(tmp_path, lowered):
     cfg = TrainConfig(**(CFG | {"algo": "actor-critic"}))
     swept = run(make_keydoor(), cfg, [2], progress=False,
                 sweep={"gamma": [0.9, 0.99], "agent.ent_coef": [0.01]})
-    assert lowered == [_one_group(2)]
+    assert _one_program(lowered, 2), lowered
     alone = run(make_keydoor(), cfg.replace(gamma=0.9, agent={"ent_coef": 0.01}), [2],
                 progress=False)
     assert swept["points"][0]["overrides"] == {"gamma": 0.9, "agent.ent_coef": 0.01}
