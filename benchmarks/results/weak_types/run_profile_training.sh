@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # profile_training, the tree before (6112625 in .bench/exp/t_old) and after, side by side:
-# 4 pinned pairs per task at once (craft make_stick compact, football), the trees alternating,
+# 4 pinned pairs per task at once (craft get_gem compact, football), the trees alternating,
 # then get_gem with 10 seeds on the GPU, one tree after the other.
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl
 export SMJAX_COMPILATION_CACHE=0; mkdir -p /tmp/p
