@@ -169,9 +169,11 @@ def _add_list(sub):
 def _cmd_list(args) -> int:
     # from the module, not the package: a folder named smjax beside a user's script can
     # shadow the package's __init__ while its modules still import
-    from smjax.core.registry import make, registry
+    from smjax.core.registry import make, registry, unavailable
 
-    if not any(name.startswith(args.prefix) for name in registry()):
+    missing = {env: why for env, why in unavailable().items() if env.startswith(args.prefix)
+               or args.prefix.startswith(env + "/")}
+    if not missing and not any(name.startswith(args.prefix) for name in registry()):
         raise UsageError(f"no registered task starts with {args.prefix!r}; `smjax list` shows "
                          f"them all")
     for name, desc in registry().items():
@@ -184,6 +186,8 @@ def _cmd_list(args) -> int:
                 print(f"    [{hname}]")
                 for line in h.describe().splitlines():
                     print(f"      {line}")
+    for env, why in missing.items():  # its tasks are not registered: say what to install
+        print(f"{env + '/...':28s} not available: {why}")
     return 0
 
 

@@ -99,6 +99,13 @@ def registry() -> dict[str, str]:
     return {name: entry.description for name, entry in sorted(_REGISTRY.items())}
 
 
+def unavailable() -> dict[str, str]:
+    """Environment packages whose import failed (a dependency not installed): their name
+    -> why, which says what to install."""
+    _load()
+    return dict(sorted(_LOAD_ERRORS.items()))
+
+
 def get_entry(name: str) -> RegistryEntry:
     module, name = split_task(name)
     if module is not None:
@@ -112,11 +119,12 @@ def get_entry(name: str) -> RegistryEntry:
         )
     _load(name.split("/", 1)[0])
     if name not in _REGISTRY:
-        _load()
         prefix = name.split("/", 1)[0]
+        if prefix in _LOAD_ERRORS:  # e.g. an optional dependency not installed
+            raise KeyError(f"task {name!r} is not available: environment package {prefix!r} "
+                           f"failed to import: {_LOAD_ERRORS[prefix]}")
+        _load()
         hint = ""
-        if prefix in _LOAD_ERRORS:
-            hint = f" (environment package '{prefix}' failed to import: {_LOAD_ERRORS[prefix]})"
         close = difflib.get_close_matches(name, list(_REGISTRY), n=3)
         maybe = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
         mine = "" if module else (" Your own task: name it MODULE:ENV/TASK, or pass --import "

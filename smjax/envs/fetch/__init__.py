@@ -20,7 +20,12 @@ import io
 # MuJoCo prints on import that its optional warp backend is missing ("Failed to import
 # warp"); smjax uses MJX's JAX backend, so the note is noise in every command's output
 with contextlib.redirect_stdout(io.StringIO()):
-    from mujoco import mjx  # noqa: F401
+    try:
+        from mujoco import mjx  # noqa: F401
+    except ModuleNotFoundError as err:  # an optional dependency (the ``fetch`` extra)
+        raise ModuleNotFoundError(
+            f"Fetch & Stack needs MuJoCo MJX ({err}): pip install 'smjax[fetch]' "
+            f"(in a clone: pip install -e '.[fetch]')", name=err.name) from err
 
 from smjax.envs.fetch.env import FetchEnv, make_fetch, register_all
 from smjax.envs.fetch.model import PhysicsConfig
