@@ -228,6 +228,8 @@ def cmd_train(args) -> int:
     if args.profile:
         _write_profile(out)
     if sweep is None:
+        if not args.quiet:  # for a reader; stdout's JSON line is for scripts
+            print(readable_summary(results, out), file=sys.stderr)
         print(json.dumps(_summary(results)))
         print(f"wrote {Path(out) / 'results.json'}, curves.csv, curves.png, policy/")
     else:
@@ -260,6 +262,40 @@ def _write_profile(out) -> None:
     path = Path(out) / "profile.json"
     atomic_write_text(path, json.dumps(TIMELINE.to_dict(), indent=1) + "\n")
     print(f"wrote {path}", file=sys.stderr)
+
+
+def _per_seed(values, fmt: str) -> str:
+    """A few seeds' values side by side; many seeds' mean and range."""
+    values = [v for v in values if v is not None]
+    if not values:
+        return "-"
+    if len(values) <= 8:
+        return "  ".join(format(v, fmt) for v in values)
+    mean = sum(values) / len(values)
+    mean = round(mean) if all(isinstance(v, int) for v in values) else mean
+    return (f"mean {format(mean, fmt)} (lowest {format(min(values), fmt)}, highest "
+            f"{format(max(values), fmt)})")
+
+
+def readable_summary(results: dict, out) -> str:
+    """A run's outcome for a reader: per seed (or, for many seeds, their mean and range)
+    the final success, the levels' episodes and fine-tuning's, and the time it took."""
+    seeds = results["seeds"]
+    head = (f"{results['env']}/{results['task']}, {results['method']} {results['algo']}, "
+            f"{len(seeds)} seed{'s' * (len(seeds) > 1)}")
+    success = results["final_success"]
+    what = "final return" if results.get("success_unbounded") else "final success"
+    mean = f" (mean {sum(success) / len(success):.3f})" if 1 < len(success) <= 8 else ""
+    lines = [f"{head}:", f"  {what:14s} {_per_seed(success, '.3f')}{mean}, the learned "
+                           f"hierarchy alone (policy: {results['eval_policy']})"]
+    lines.append(f"  {'levels':14s} {_per_seed(results['episodes_to_threshold'], ',')} "
+                 f"episodes to the thresholds")
+    tuning = results.get("finetune") or {}
+    if tuning.get("episodes"):
+        lines.append(f"  {'fine-tuning':14s} {_per_seed(tuning['episodes'], ',')} episodes")
+    lines.append(f"  {results['wall_seconds']:.1f} s training and evaluating (compiling "
+                 f"{results['compile_seconds']:.1f} s of it); files in {out}")
+    return "\n".join(lines)
 
 
 def _summary(results: dict) -> dict:

@@ -40,3 +40,23 @@ def test_render_checks_its_arguments_before_playing(tmp_path, capsys, monkeypatc
     monkeypatch.chdir(tmp_path)
     code, err = cli_answer(["render", "craft/make_stick", *extra], capsys)
     assert code == 2 and needle in err, err
+
+
+def test_the_readable_summary_gives_each_seed_or_many_seeds_mean_and_range():
+    from smjax.cli_train import readable_summary
+
+    results = {"env": "craft", "task": "make_stick", "method": "top-down", "algo": "ppo",
+               "seeds": [0, 1], "final_success": [0.9383, 0.9305], "eval_policy": "sample",
+               "episodes_to_threshold": [3351, 3297], "finetune": {"episodes": [1261, 1561]},
+               "wall_seconds": 25.87, "compile_seconds": 1.49, "success_unbounded": False}
+    text = readable_summary(results, "runs/quickstart")
+    assert text.splitlines()[0] == "craft/make_stick, top-down ppo, 2 seeds:"
+    assert "0.938  0.930 (mean 0.934)" in text and "3,351  3,297 episodes" in text
+    assert "1,261  1,561 episodes" in text and "compiling 1.5 s" in text
+    assert "runs/quickstart" in text
+    many = dict(results, seeds=list(range(10)), final_success=[0.8 + i / 100 for i in range(10)],
+                episodes_to_threshold=[5000 + 100 * i for i in range(10)], finetune=None,
+                success_unbounded=True)
+    text = readable_summary(many, "runs/x")
+    assert "final return   mean 0.845 (lowest 0.800, highest 0.890)" in text
+    assert "mean 5,450 (lowest 5,000, highest 5,900)" in text and "fine-tuning" not in text

@@ -267,3 +267,28 @@ def test_a_hooks_modules_are_imported_on_a_thread_and_a_failing_one_waits_for_it
     # the missing module raised nowhere; the one after it was still imported
     assert not thread.is_alive() and "colorsys" in sys.modules
     assert import_ahead([Hook()]) is None  # no modules named: no thread
+
+
+def test_hooks_hear_of_the_run_while_it_is_built_and_are_closed_if_building_fails(monkeypatch):
+    class Building(Hook):
+        def __init__(self):
+            self.calls = []
+
+        def prepare(self, trainer):  # the run's shape is known, nothing is built yet
+            self.calls.append(("prepare", len(trainer.seeds), trainer.num_stages))
+
+        def close(self):
+            self.calls.append("close")
+
+    hook = Building()
+
+    def refused(self, ahead):
+        raise MemoryError("no room for the first state")
+
+    monkeypatch.setattr(HierarchyTrainer, "_build_state", refused)
+    try:
+        _trainer([hook])
+        raise AssertionError("the trainer was built")
+    except MemoryError:
+        pass
+    assert hook.calls == [("prepare", 2, 3), "close"]

@@ -37,3 +37,26 @@ def test_the_guide_describes_the_bar_it_shows():
     text = " ".join(guide.split())
     assert "one progress bar per level" not in text
     assert "`2 seeds x (3 levels + fine-tune): 3/8`" in text and "`seeds_at`" in text
+
+
+def test_the_bar_shows_from_the_start_what_the_seconds_before_training_go_to(capsys):
+    from smjax.train.progress import PREPARING
+
+    trainer = SimpleNamespace(seeds=[0, 1], plans=[None] * 2, num_stages=3,
+                              state=SimpleNamespace(stage=[0, 0]))
+    hook = ProgressBar()
+    hook.prepare(trainer)
+    assert hook.bar.postfix == PREPARING and hook.bar.total == 6
+    hook.start(trainer)  # still compiling or loading until the first chunk reports
+    assert hook.bar.postfix == PREPARING
+    hook.close()  # a run refused before its first chunk leaves no bar behind its message
+    assert hook.bar.disable and not hook.bar.leave
+    trained = ProgressBar()
+    trained.prepare(trainer)
+    seeds = [SeedStatus(where="L1", running=0.5, gate=None, task=None, episodes=10,
+                        env_steps=80, by_steps=False)] * 2
+    trained.chunk(trainer, ChunkReport(chunk=1, seconds=1.0, steps=64, scalars=[], seeds=seeds,
+                                       stages_done=0, stage_ended=False))
+    assert PREPARING not in trained.bar.postfix and "seeds_at=L1:2" in trained.bar.postfix
+    trained.close()
+    assert trained.bar.leave

@@ -60,6 +60,11 @@ class Hook:
 
     modules: tuple[str, ...] = ()
 
+    def prepare(self, trainer) -> None:
+        """The trainer is being built: its seeds and stages are known, its programs are
+        being compiled (a first run of these settings: tens of seconds on a CPU) or loaded
+        from the cache, and nothing has trained."""
+
     def start(self, trainer) -> None:
         """Training starts (or resumes) with ``trainer``'s state."""
 

@@ -86,9 +86,26 @@ class HierarchyTrainer:
         self.stages: list[Stage] = [self.levels] + ([self.finetune] if self.finetune else [])
         self.num_stages = len(plans) + (self.finetune is not None)
         self.state = TrainerState.new(plans, S)
+        self.hooks = (default_hooks(cfg, out_dir, progress, run_meta) if hooks is None
+                      else list(hooks))
+        for hook in self.hooks:  # the seeds and stages are known; the programs are not
+            hook.prepare(self)
         self.runner = ChunkRunner(engine, self.slots, metrics=cfg.run.tensorboard)
         self.ahead = ahead if ahead is not None else CompileAhead.for_backend()
         self.ahead_rest = False  # the rest submitted: gate, joint chunk, evaluation
+        # the results calls the hooks get after ``end``: ``smjax.train.run`` sets it (one a
+        # run, one a sweep point); none where the trainer is run on its own
+        self.results_due = 0
+        try:
+            self._build_state(ahead)
+        except BaseException:
+            self.close_hooks()
+            raise
+
+    def _build_state(self, ahead: CompileAhead | None) -> None:
+        """The slots' first device state (the large programs submitted to ``ahead`` first,
+        where it compiles from the start)."""
+        cfg = self.cfg
         keys = self.slots.committed(
             jax.vmap(jax.random.PRNGKey)(jnp.asarray(self.seeds, jnp.uint32)))
         if ahead is not None and ahead.on and ahead.from_start and self.slots.mesh is None:
@@ -105,11 +122,6 @@ class HierarchyTrainer:
         tuning_hp = finetune_hp(cfg, self.arrays.state.learner.hp)
         if self.finetune is not None:
             self.finetune.hp = tuning_hp
-        self.hooks = (default_hooks(cfg, out_dir, progress, run_meta) if hooks is None
-                      else list(hooks))
-        # the results calls the hooks get after ``end``: ``smjax.train.run`` sets it (one a
-        # run, one a sweep point); none where the trainer is run on its own
-        self.results_due = 0
 
     def initial_arrays(self, keys: jax.Array) -> TrainArrays:
         """Every slot's device state before its first stage starts, from its key [S]: a
@@ -148,17 +160,21 @@ class HierarchyTrainer:
         """Train every seed through its stages; evaluate; the run's raw results."""
         st = self.state
         t_start = time.perf_counter() - st.wall_seconds
-        self.timed("start levels (learner init, env reset)", self.start,
-                   [s for s in self.training() if not st.started[s]])
-        for hook in self.hooks:
-            hook.start(self)
-        import_ahead(self.hooks)
         try:
+            self.timed("start levels (learner init, env reset)", self.start,
+                       [s for s in self.training() if not st.started[s]])
+            for hook in self.hooks:
+                hook.start(self)
+            import_ahead(self.hooks)
             return self.train_and_evaluate(t_start)
         finally:
             self.ahead.close()
-            for hook in self.hooks:
-                hook.close()
+            self.close_hooks()
+
+    def close_hooks(self) -> None:
+        """Every hook's ``close``: the trainer stops, done or not."""
+        for hook in self.hooks:
+            hook.close()
 
     def train_and_evaluate(self, t_start: float) -> dict:
         """The driver loop: chunks, the stages' accounts and decisions, hooks; then the

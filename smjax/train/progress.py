@@ -14,13 +14,19 @@ import numpy as np
 from smjax.train.hooks import ChunkReport, Hook
 
 
+# the bar's postfix until the first chunk
+PREPARING = "compiling or loading the programs"
+
+
 class ProgressBar(Hook):
     """The progress bar as a hook of the driver loop."""
 
     def __init__(self):
         self.bar = None
 
-    def start(self, trainer) -> None:
+    def prepare(self, trainer) -> None:
+        """The bar from the moment the run's shape is known, saying what the seconds before
+        the first chunk are spent on (a first run compiles for tens of seconds)."""
         from tqdm.auto import tqdm
 
         seeds, levels = len(trainer.seeds), len(trainer.plans)
@@ -30,6 +36,13 @@ class ProgressBar(Hook):
         self.bar = tqdm(total=seeds * stages, initial=int(sum(trainer.state.stage)),
                         unit="stage", leave=True,
                         desc=f"{seeds} seed{'s' * (seeds > 1)} x {what}")
+        self.bar.set_postfix_str(PREPARING)
+
+    def start(self, trainer) -> None:
+        if self.bar is None:  # a trainer that did not prepare its hooks
+            self.prepare(trainer)
+        self.bar.n = int(sum(trainer.state.stage))  # a resumed run's stages done
+        self.bar.refresh()
 
     def chunk(self, trainer, report: ChunkReport) -> None:
         self.bar.n = report.stages_done
@@ -40,6 +53,14 @@ class ProgressBar(Hook):
         self.bar.n = int(sum(trainer.state.stage))
         self.bar.refresh()
         self.bar.close()
+
+    def close(self) -> None:
+        """A run that stopped before its first chunk (a refused setting, Ctrl-C) leaves no
+        bar behind its message; one that trained keeps the bar where it stopped."""
+        if self.bar is not None and not self.bar.disable:
+            if self.bar.postfix == PREPARING:
+                self.bar.leave = False
+            self.bar.close()
 
 
 def postfix(report: ChunkReport) -> dict:

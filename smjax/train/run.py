@@ -186,7 +186,7 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
                if resume else None)
     # programs may compile ahead from the trainer's construction on; closed by the run, or
     # here where it never starts (nothing left queued to compile)
-    ahead = CompileAhead.for_backend()
+    ahead, trainer = CompileAhead.for_backend(), None
     try:
         with TIMELINE.span("memory check, engine and trainer"):
             check_fits(env, env_params, cfg, len(slot_seeds))
@@ -212,6 +212,8 @@ def _run_locked(task, cfg: TrainConfig, seeds: list[int], outputs: Outputs,
                 trainer.restore(resume_from, checked)
     except BaseException:
         ahead.close()
+        if trainer is not None:  # a restore that failed: the progress bar goes
+            trainer.close_hooks()
         raise
     raw = _train(trainer, env, env_params, out_dir)
     extra = {"hierarchy_used": resolved.hierarchy_name, "env_overrides": env_overrides,
