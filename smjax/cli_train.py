@@ -234,6 +234,10 @@ def cmd_train(args) -> int:
         print(f"wrote {Path(out) / 'results.json'}, curves.csv, curves.png, policy/")
     else:
         for k, point in enumerate(results["points"]):
+            if not args.quiet:
+                where = Path(out) / f"point-{k}"
+                print(f"point {k} {json.dumps(point['overrides'])}: "
+                      f"{readable_summary(point['results'], where)}", file=sys.stderr)
             print(json.dumps({"point": k, "overrides": point["overrides"]} | _summary(point["results"])))
         print(f"wrote {Path(out) / 'sweep.json'}, point-<k>/results.json, curves.csv, curves.png, "
               f"policy/")
@@ -265,36 +269,38 @@ def _write_profile(out) -> None:
 
 
 def _per_seed(values, fmt: str) -> str:
-    """A few seeds' values side by side; many seeds' mean and range."""
-    values = [v for v in values if v is not None]
-    if not values:
-        return "-"
+    """A few seeds' values side by side; many seeds' mean and range (None: a threshold
+    not reached)."""
     if len(values) <= 8:
-        return "  ".join(format(v, fmt) for v in values)
-    mean = sum(values) / len(values)
-    mean = round(mean) if all(isinstance(v, int) for v in values) else mean
-    return (f"mean {format(mean, fmt)} (lowest {format(min(values), fmt)}, highest "
-            f"{format(max(values), fmt)})")
+        return "  ".join("not reached" if v is None else format(v, fmt) for v in values)
+    reached = [v for v in values if v is not None]
+    missing = f", {len(values) - len(reached)} not reached" if len(reached) < len(values) else ""
+    if not reached:
+        return "not reached"
+    mean = sum(reached) / len(reached)
+    mean = round(mean) if all(isinstance(v, int) for v in reached) else mean
+    return (f"mean {format(mean, fmt)}, lowest {format(min(reached), fmt)}, highest "
+            f"{format(max(reached), fmt)}{missing}")
 
 
 def readable_summary(results: dict, out) -> str:
     """A run's outcome for a reader: per seed (or, for many seeds, their mean and range)
     the final success, the levels' episodes and fine-tuning's, and the time it took."""
     seeds = results["seeds"]
-    head = (f"{results['env']}/{results['task']}, {results['method']} {results['algo']}, "
-            f"{len(seeds)} seed{'s' * (len(seeds) > 1)}")
     success = results["final_success"]
     what = "final return" if results.get("success_unbounded") else "final success"
-    mean = f" (mean {sum(success) / len(success):.3f})" if 1 < len(success) <= 8 else ""
-    lines = [f"{head}:", f"  {what:14s} {_per_seed(success, '.3f')}{mean}, the learned "
-                           f"hierarchy alone (policy: {results['eval_policy']})"]
-    lines.append(f"  {'levels':14s} {_per_seed(results['episodes_to_threshold'], ',')} "
-                 f"episodes to the thresholds")
+    mean = f"mean {sum(success) / len(success):.3f}; " if 1 < len(success) <= 8 else ""
+    lines = [f"{results['env']}/{results['task']}, {results['method']} {results['algo']}, "
+             f"{len(seeds)} seed{'s' * (len(seeds) > 1)}:",
+             f"  {what:21s}{_per_seed(success, '.3f')} ({mean}the learned hierarchy alone, "
+             f"policy {results['eval_policy']})",
+             f"  {'levels' + chr(39) + ' episodes':21s}"
+             f"{_per_seed(results['episodes_to_threshold'], ',')} (until each level's threshold)"]
     tuning = results.get("finetune") or {}
     if tuning.get("episodes"):
-        lines.append(f"  {'fine-tuning':14s} {_per_seed(tuning['episodes'], ',')} episodes")
-    lines.append(f"  {results['wall_seconds']:.1f} s training and evaluating (compiling "
-                 f"{results['compile_seconds']:.1f} s of it); files in {out}")
+        lines.append(f"  {'fine-tuning episodes':21s}{_per_seed(tuning['episodes'], ',')}")
+    lines.append(f"  {results['wall_seconds']:.1f} s training and evaluating, "
+                 f"{results['compile_seconds']:.1f} s of it compiling; files in {out}")
     return "\n".join(lines)
 
 

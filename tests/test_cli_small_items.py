@@ -51,12 +51,16 @@ def test_the_readable_summary_gives_each_seed_or_many_seeds_mean_and_range():
                "wall_seconds": 25.87, "compile_seconds": 1.49, "success_unbounded": False}
     text = readable_summary(results, "runs/quickstart")
     assert text.splitlines()[0] == "craft/make_stick, top-down ppo, 2 seeds:"
-    assert "0.938  0.930 (mean 0.934)" in text and "3,351  3,297 episodes" in text
-    assert "1,261  1,561 episodes" in text and "compiling 1.5 s" in text
+    assert "0.938  0.930 (mean 0.934;" in text and "episodes     3,351  3,297 (until" in text
+    assert "episodes 1,261  1,561" in text and "1.5 s of it compiling" in text
     assert "runs/quickstart" in text
     many = dict(results, seeds=list(range(10)), final_success=[0.8 + i / 100 for i in range(10)],
                 episodes_to_threshold=[5000 + 100 * i for i in range(10)], finetune=None,
                 success_unbounded=True)
     text = readable_summary(many, "runs/x")
-    assert "final return   mean 0.845 (lowest 0.800, highest 0.890)" in text
-    assert "mean 5,450 (lowest 5,000, highest 5,900)" in text and "fine-tuning" not in text
+    assert "final return         mean 0.845, lowest 0.800, highest 0.890 (the" in text
+    assert "mean 5,450, lowest 5,000, highest 5,900" in text and "fine-tuning" not in text
+    short = dict(results, episodes_to_threshold=[3351, None])  # a level's budget ran out
+    assert "3,351  not reached (until" in readable_summary(short, "runs/x")
+    many["episodes_to_threshold"] = [None] + many["episodes_to_threshold"][1:]
+    assert "highest 5,900, 1 not reached (until" in readable_summary(many, "runs/x")
