@@ -1,5 +1,8 @@
 #!/usr/bin/env bash
-# fresh venv, empty pip cache, `pip install -e TREE`, alternating the trees
+# `pip install -e TREE` into a new virtual environment with an empty pip cache, the trees before
+# and after alternating, three rounds. /tmp/tree_old and /tmp/tree_new are clones checked out at
+# the two commits (git clone REPO /tmp/tree_new; git clone REPO /tmp/tree_old; git -C
+# /tmp/tree_old checkout c2bd075).
 out=/tmp/install_times.jsonl; : > $out
 for round in 1 2 3; do
   for label in old new; do
