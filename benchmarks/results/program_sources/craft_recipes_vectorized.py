@@ -1,7 +1,7 @@
 """Craft's transition with the inventory as one vector and the recipes as tables: one
 workshop's recipes (in file order) picked by selects, each fired by a reduction over the kinds.
 Measured, not adopted (craft_recipes_bench.py): fewer instructions, a slower step on a CPU."""
-import numpy as np, jax, jax.numpy as jnp
+import numpy as np, jax.numpy as jnp
 from smjax.envs.craft import constants as C
 from smjax.envs.craft.types import CraftState
 N = C.GRID_SIZE

@@ -28,7 +28,7 @@ def attribute(hlo):
             if parent == fid: break
             fid = parent
         return out
-    by_file = collections.Counter(); by_line = collections.Counter(); by_mod = collections.Counter()
+    by_file = collections.Counter(); by_line = collections.Counter()
     for m in re.finditer(r'^\s+(?:ROOT )?%\S+ = .*$', hlo, re.M):
         t = re.search(r'stack_frame_id=(\d+)', m.group(0))
         c = chain(int(t.group(1))) if t else []

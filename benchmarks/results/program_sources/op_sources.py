@@ -3,9 +3,8 @@
 each program the engine compiles attributed, instruction by instruction, to the innermost smjax
 source line on its stack (hlo_attr.py); the run stops after the third program. From the
 repository root: JAX_PLATFORMS=cpu PYTHONPATH=. python benchmarks/results/program_sources/op_sources.py"""
-import os, re, sys, collections, json, tempfile
+import os, sys, tempfile
 os.environ["SMJAX_COMPILATION_CACHE"] = "0"; os.environ["SMJAX_COMPILE_AHEAD"] = "0"
-import jax
 from smjax.train import engine as engine_module
 from smjax.train.config import resolve_config
 from smjax.train.run import run
