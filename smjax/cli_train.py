@@ -289,13 +289,14 @@ def readable_summary(results: dict, out) -> str:
     seeds = results["seeds"]
     success = results["final_success"]
     what = "final return" if results.get("success_unbounded") else "final success"
+    levels = "levels' episodes"
     mean = f"mean {sum(success) / len(success):.3f}; " if 1 < len(success) <= 8 else ""
     lines = [f"{results['env']}/{results['task']}, {results['method']} {results['algo']}, "
              f"{len(seeds)} seed{'s' * (len(seeds) > 1)}:",
              f"  {what:21s}{_per_seed(success, '.3f')} ({mean}the learned hierarchy alone, "
              f"policy {results['eval_policy']})",
-             f"  {'levels' + chr(39) + ' episodes':21s}"
-             f"{_per_seed(results['episodes_to_threshold'], ',')} (until each level's threshold)"]
+             f"  {levels:21s}{_per_seed(results['episodes_to_threshold'], ',')} (until each "
+             f"level's threshold)"]
     tuning = results.get("finetune") or {}
     if tuning.get("episodes"):
         lines.append(f"  {'fine-tuning episodes':21s}{_per_seed(tuning['episodes'], ',')}")

@@ -13,7 +13,7 @@ from smjax.train import ConfigError, TrainConfig
 from smjax.train import checkpoint as ckpt
 from smjax.train.engine import Engine
 from smjax.train.run import run
-from smjax.train.seed_threads import group_count
+from smjax.train.seed_threads import group_size
 
 CFG = dict(num_envs=16, rollout_ticks=16, updates_per_chunk=2, max_episodes_per_level=150,
            success_window=64, gate_envs=32, eval_envs=32, finetune="off", checkpoint_every=1e9)
@@ -27,7 +27,7 @@ def _one_program(lowered: list, slots: int) -> bool:
     if len(lowered) != 1:
         return False
     size, threads = lowered[0]
-    return size == -(-slots // group_count(threads, slots))
+    return size == group_size(threads, slots)
 
 
 def _numbers(res: dict) -> dict:

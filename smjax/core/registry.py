@@ -124,12 +124,11 @@ def get_entry(name: str) -> RegistryEntry:
             raise KeyError(f"task {name!r} is not available: environment package {prefix!r} "
                            f"failed to import: {_LOAD_ERRORS[prefix]}")
         _load()
-        hint = ""
         close = difflib.get_close_matches(name, list(_REGISTRY), n=3)
         maybe = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
         mine = "" if module else (" Your own task: name it MODULE:ENV/TASK, or pass --import "
                                   "MODULE, where MODULE calls smjax.core.register.")
-        raise KeyError(f"unknown task {name!r}{hint}.{maybe} Valid names: "
+        raise KeyError(f"unknown task {name!r}.{maybe} Valid names: "
                        f"{', '.join(sorted(_REGISTRY))}.{mine}")
     return _REGISTRY[name]
 

@@ -58,11 +58,15 @@ def thread_count(one_after_another: bool) -> int:
     return len(cores) if cores else (os.cpu_count() or 1)
 
 
+def group_size(threads: int, seeds: int) -> int:
+    """Seeds in each group of ``seeds`` on ``threads`` (a grouped program's seed axis)."""
+    return -(-seeds // max(1, threads))
+
+
 def group_count(threads: int, seeds: int) -> int:
     """Groups of ``seeds`` on ``threads``: as many as the threads, but none of copies alone
     (10 seeds on 8 threads are 5 groups of 2)."""
-    size = -(-seeds // max(1, threads))
-    return -(-seeds // size)
+    return -(-seeds // group_size(threads, seeds))
 
 
 class Busy(NamedTuple):
